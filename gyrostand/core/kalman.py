@@ -1,0 +1,225 @@
+"""Compiled Kalman-filter kernels (numba), textbook symbols.
+
+Two kernels:
+
+* :func:`kf_innovations` — the exact-likelihood filter of the stochastic part of a model:
+  independent scalar Gauss-Markov / random-walk states ``x_i`` with
+  ``x_{i,k} = phi_i x_{i,k-1} + w_{i,k}``, ``w ~ N(0, q_i)``, ``x_{i,0} ~ N(0, p0_i)``,
+  observed as ``y_k = sum_i x_{i,k} + v_k``, ``v ~ N(0, r)``. It filters several data
+  columns at once with the same gains (the gains do not depend on the data), which is how
+  the linear parameters are concentrated out of the likelihood by GLS (de Jong 1991).
+* :func:`kf_step` — one predict + update of a general small filter (the LKF).
+
+Both use the Joseph-form covariance update, which keeps ``P`` symmetric positive
+semi-definite in floating point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
+    """Filter every column of ``Y`` (shape (N, m)) with the same gains.
+
+    Column 0 is the measurement ``y`` and columns 1.. the regressors; a NaN in column 0
+    marks a missing sample (predict only). Returns ``(E, f, G, slogf, nobs)``:
+
+    * ``E`` (N, m): innovations ``e_k = Y_k - H x_{k|k-1}`` (NaN where missing), and
+      ``f`` (N,): their variance ``f_k = H P_{k|k-1} H' + r`` — only when ``store``,
+      else empty arrays (the likelihood needs no (N, m) array);
+    * ``G = sum_k e_k e_k' / f_k`` (m, m), ``slogf = sum_k ln f_k`` and ``nobs`` over
+      the observed samples (``slogf = -inf`` if some ``f_k <= 0``).
+    """
+    n = phi.shape[0]
+    N, m = Y.shape
+    X = np.zeros((n, m))
+    P = np.zeros((n, n))
+    for i in range(n):
+        P[i, i] = p0[i]
+    NE = N if store else 0
+    E = np.empty((NE, m))
+    f_out = np.empty(NE)
+    G = np.zeros((m, m))
+    e_row = np.empty(m)
+    slogf = 0.0
+    nobs = 0
+    PH = np.empty(n)
+    K = np.empty(n)
+    A = np.empty((n, n))
+    AH = np.empty(n)
+    for k in range(N):
+        if np.isnan(Y[k, 0]):
+            if store:
+                E[k, :] = np.nan
+                f_out[k] = np.nan
+        else:
+            # f = H P H' + R, with H = [1, ..., 1]
+            f = r
+            for i in range(n):
+                s = 0.0
+                for j in range(n):
+                    s += P[i, j]
+                PH[i] = s
+                f += s
+            if f <= 0.0:
+                return E, f_out, G, -np.inf, nobs
+            slogf += np.log(f)
+            nobs += 1
+            # K = P H' / f
+            for i in range(n):
+                K[i] = PH[i] / f
+            # e = y - H x ;  x = x + K e
+            for c in range(m):
+                hx = 0.0
+                for i in range(n):
+                    hx += X[i, c]
+                e = Y[k, c] - hx
+                e_row[c] = e
+                for i in range(n):
+                    X[i, c] += K[i] * e
+            if store:
+                f_out[k] = f
+                for c in range(m):
+                    E[k, c] = e_row[c]
+            for a in range(m):
+                for c in range(a, m):
+                    G[a, c] += e_row[a] * e_row[c] / f
+            # Joseph form: P = (I - K H) P (I - K H)' + K R K'
+            # (I - K H) P = P - K (H P);  then right-multiply by (I - K H)'
+            for i in range(n):
+                for j in range(n):
+                    A[i, j] = P[i, j] - K[i] * PH[j]
+            for i in range(n):
+                s = 0.0
+                for j in range(n):
+                    s += A[i, j]
+                AH[i] = s
+            for i in range(n):
+                for j in range(n):
+                    P[i, j] = A[i, j] - AH[i] * K[j] + K[i] * r * K[j]
+            for i in range(n):
+                for j in range(i + 1, n):
+                    s = 0.5 * (P[i, j] + P[j, i])
+                    P[i, j] = s
+                    P[j, i] = s
+        # predict: x = F x ; P = F P F' + Q  (F, Q diagonal)
+        for i in range(n):
+            for c in range(m):
+                X[i, c] *= phi[i]
+            for j in range(n):
+                P[i, j] *= phi[i] * phi[j]
+            P[i, i] += q[i]
+    for a in range(m):
+        for c in range(a):
+            G[a, c] = G[c, a]
+    return E, f_out, G, slogf, nobs
+
+
+def kf_innovations(phi, q, p0, r, Y):
+    """Innovations ``E`` (N, m) of every column of ``Y`` and their variances ``f`` (N,)."""
+    E, f, _, _, _ = kf_run(phi, q, p0, r, np.ascontiguousarray(Y, dtype=float), True)
+    return E, f
+
+
+@njit(cache=True, nogil=True)
+def first_order_response(u, phi, a0, a1, x0):  # pragma: no cover - compiled
+    """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k  (exact discretisation, FOH input)."""
+    N = u.shape[0]
+    x = np.empty(N)
+    x[0] = x0
+    for k in range(1, N):
+        x[k] = phi * x[k - 1] + a0 * u[k - 1] + a1 * u[k]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def kf_step(x, P, A, Qd, H, r, z):  # pragma: no cover - compiled
+    """One Kalman predict (if ``A`` given) + update, in place. Returns ``(e, f)``.
+
+    predict:  x = A x ;  P = A P A' + diag(Qd)
+    update:   e = z - H x ; f = H P H' + r ; K = P H' / f ; x = x + K e
+              P = (I - K H) P (I - K H)' + K r K'      (Joseph form)
+    A NaN ``z`` skips the update and returns ``(nan, nan)``.
+    """
+    n = x.shape[0]
+    if A.shape[0] == n:
+        xn = np.zeros(n)
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += A[i, j] * x[j]
+            xn[i] = s
+        AP = np.zeros((n, n))
+        for i in range(n):
+            for j in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += A[i, k] * P[k, j]
+                AP[i, j] = s
+        for i in range(n):
+            x[i] = xn[i]
+            for j in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += AP[i, k] * A[j, k]
+                P[i, j] = s
+            P[i, i] += Qd[i]
+    if np.isnan(z):
+        return np.nan, np.nan
+    PH = np.zeros(n)
+    hx = 0.0
+    f = r
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += P[i, j] * H[j]
+        PH[i] = s
+        hx += H[i] * x[i]
+    for i in range(n):
+        f += H[i] * PH[i]
+    e = z - hx
+    K = PH / f
+    for i in range(n):
+        x[i] += K[i] * e
+    # (I - K H) P = P - K (H P), H P = PH' since P is symmetric
+    B = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            B[i, j] = P[i, j] - K[i] * PH[j]
+    BH = np.zeros(n)
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += B[i, j] * H[j]
+        BH[i] = s
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = B[i, j] - BH[i] * K[j] + K[i] * r * K[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+    return e, f
+
+
+def foh_weights(beta: float, dt: float) -> tuple[float, float, float]:
+    """Exact discretisation of dx/dt = -beta x + u(t) with u linear between samples.
+
+    Returns ``(phi, a0, a1)`` with ``phi = exp(-beta dt)``,
+    ``a0 = int_0^dt e^{-beta s} (s/dt) ds`` (weight of u_{k-1}) and
+    ``a1 = int_0^dt e^{-beta s} (1 - s/dt) ds`` (weight of u_k), so that
+    ``x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k``; ``a0 + a1 = (1 - phi)/beta``.
+    """
+    x = beta * dt
+    phi = float(np.exp(-x))
+    total = dt * (-np.expm1(-x) / x) if x != 0.0 else dt
+    if abs(x) < 1e-3:
+        # 1 - e^{-x}(1 + x) = x^2/2 - x^3/3 + x^4/8 - x^5/30 + ...
+        a0 = dt * (0.5 - x / 3.0 + x * x / 8.0 - x**3 / 30.0)
+    else:
+        a0 = (1.0 - phi * (1.0 + x)) / (beta * x)
+    return phi, float(a0), float(total - a0)

@@ -1,0 +1,310 @@
+"""The paper's linearised Kalman filter with a moving linearisation point (Algorithm 2).
+
+With ε = ε₀(t) + δε, β = β₀ + δβ, γ = γ₀ + δγ, b = b₀ + δb and second-order terms dropped:
+
+    dε₀/dt = −β₀ ε₀ + γ₀ T(t)                        (the moving linearisation point)
+    dδε/dt = −β₀ δε − ε₀(t) δβ + T(t) δγ + √(2σ²β₀) w
+    Y_k − ε₀_k − b₀ = δε_k + δb + (other processes) + v_k
+
+State ``[δε, δβ, (δγ), (δb), (r), (ε₂)]``: the parameter corrections are constant states;
+further random processes of the model (``random_walk`` r, ``markov2`` ε₂) are stacked with
+their own dynamics and enter the measurement with coefficient 1. β₀, γ₀ stay fixed during a
+pass; ε₀ is propagated. Discretisation is exact in δε (φ₀ = e^{−β₀Δt}) with the inputs
+ε₀(t) and T(t) linear between samples.
+
+Noise levels (σ, σ_v, and those of the other processes) are *held*, as in the paper where
+σ is known: given by the caller, or estimated beforehand (least squares' moments when the
+model is a single process, otherwise maximum likelihood) — the result says which.
+:class:`OnlineLKF` runs sample by sample with the estimate and covariance available after
+every sample; :func:`lkf` is that same filter over a batch, optionally iterated
+(re-linearised at the previous estimate until it settles).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..errors import ModelError
+from .data import Samples
+from .kalman import foh_weights, kf_step
+from .model import Model
+from .results import Estimate, FitResult
+from .validate import require_samples
+
+log = logging.getLogger(__name__)
+
+#: the paper's recommended linearisation point (MODEL.md: "of order 10^-4")
+PAPER_POINT = 1e-4
+ESTIMATED = ("markov.beta", "temp.gamma", "bias.b")
+SUPPORTED = {"markov", "temp", "bias", "white", "random_walk", "markov2"}
+
+
+def lkf_layout(model: Model) -> list[str]:
+    """Names of the LKF's states, in order."""
+    if "markov" not in model:
+        raise ModelError("lkf linearises the 'markov' term's dynamics: the model needs it")
+    extra = [n for n in model.names if n not in SUPPORTED]
+    if extra:
+        raise ModelError(f"lkf does not support the term(s) {', '.join(extra)}; use ml")
+    names = ["delta_eps", "markov.beta"]
+    if "temp" in model:
+        names.append("temp.gamma")
+    if "bias" in model:
+        names.append("bias.b")
+    if "random_walk" in model:
+        names.append("random_walk")
+    if "markov2" in model:
+        names.append("markov2")
+    return names
+
+
+def held_names(model: Model) -> list[str]:
+    """Parameters the LKF holds at given values (noise levels, β₂)."""
+    return [n for n in model.param_names if n not in ESTIMATED]
+
+
+class OnlineLKF:
+    """The LKF, one sample at a time.
+
+    Args:
+        model: the model (``markov`` required; ``temp``, ``bias``, ``random_walk``,
+            ``markov2`` optional).
+        dt: sampling step, s.
+        beta0, gamma0, b0: linearisation point.
+        held: values of the held parameters (see :func:`held_names`), e.g.
+            ``{"markov.sigma": 0.1, "white.sigma": 0.01}``.
+        prior_std: prior std of each estimated parameter's correction and of the first
+            drift discrepancy (``"delta_eps"``); by default derived from the first sample.
+    """
+
+    def __init__(self, model: Model, dt: float, *, beta0: float = PAPER_POINT,
+                 gamma0: float = PAPER_POINT, b0: float = 0.0,
+                 held: Mapping[str, float], prior_std: Mapping[str, float] | None = None):
+        self.model, self.dt = model, float(dt)
+        self.layout = lkf_layout(model)
+        missing = [n for n in held_names(model) if n not in held]
+        if missing:
+            raise ModelError(f"lkf needs value(s) for the held parameter(s) {', '.join(missing)}")
+        if not beta0 > 0:
+            raise ModelError(f"lkf linearisation point beta0 must be > 0, got {beta0}")
+        self.beta0 = float(beta0)
+        self.gamma0 = float(gamma0) if "temp" in model else 0.0
+        self.b0 = float(b0) if "bias" in model else 0.0
+        self.held = {k: float(held[k]) for k in held_names(model)}
+        self.prior_std = dict(prior_std or {})
+        n = len(self.layout)
+        self.phi0, self.a0, self.a1 = foh_weights(self.beta0, self.dt)
+        self.A = np.eye(n)
+        self.A[0, 0] = self.phi0
+        self.Qd = np.zeros(n)
+        sig = self.held["markov.sigma"]
+        self.Qd[0] = sig * sig * -math.expm1(-2 * self.beta0 * self.dt)
+        self.H = np.zeros(n)
+        self.H[0] = 1.0
+        for i, name in enumerate(self.layout):
+            if name == "bias.b":
+                self.H[i] = 1.0
+            elif name == "random_walk":
+                self.H[i] = 1.0
+                self.Qd[i] = self.held["random_walk.q"] ** 2 * self.dt
+            elif name == "markov2":
+                self.H[i] = 1.0
+                b2, s2 = self.held["markov2.beta"], self.held["markov2.sigma"]
+                self.A[i, i] = math.exp(-b2 * self.dt)
+                self.Qd[i] = s2 * s2 * -math.expm1(-2 * b2 * self.dt)
+        self.r = self.held["white.sigma"] ** 2
+        self.x = np.zeros(n)
+        self.P = np.zeros((n, n))
+        self.k = 0
+        self._no_predict = np.zeros((0, 0))
+        self._eps0 = 0.0
+        self._T = 0.0
+
+    @staticmethod
+    def default_prior_std(model: Model, dt: float, y0: float, T0: float,
+                          y_scale: float, T_scale: float) -> dict[str, float]:
+        """Uninformative priors on the scale of the data.
+
+        β ≤ 1/Δt; |γ| ≲ β|ε|/|T| (from the steady state γT = βε); |b| ≲ |y|.
+        """
+        ys = abs(y0) + y_scale
+        return {
+            "markov.beta": 1.0 / dt,
+            "temp.gamma": ys / (dt * max(abs(T0), T_scale, 1e-6)),
+            "bias.b": 10 * ys,
+        }
+
+    def _start(self, y: float, T: float) -> None:
+        n = len(self.layout)
+        # the moving point starts at the first measurement (or, in a gap, in equilibrium)
+        self._eps0 = self.gamma0 * T / self.beta0 if math.isnan(y) else y - self.b0
+        self._T = T
+        ps = self.prior_std or self.default_prior_std(
+            self.model, self.dt, 0.0 if math.isnan(y) else y, T, self.held["markov.sigma"], 1.0)
+        sig = self.held["markov.sigma"]
+        P = np.zeros((n, n))
+        P[0, 0] = ps.get("delta_eps", math.sqrt(sig * sig + self.r)) ** 2
+        for i, name in enumerate(self.layout[1:], start=1):
+            if name in ESTIMATED:
+                P[i, i] = ps[name] ** 2
+            elif name == "markov2":
+                P[i, i] = self.held["markov2.sigma"] ** 2
+        self.P = P
+
+    def update(self, y: float, T: float) -> tuple[float, float]:
+        """Process one sample: drift ``y`` (NaN = gap, predict only), temperature ``T``.
+
+        Returns the innovation and its variance (NaN for a gap).
+        """
+        if self.k == 0:
+            self._start(y, T)
+            A = self._no_predict
+        else:
+            eps_prev = self._eps0
+            u = self.a0 * self._T + self.a1 * T
+            self._eps0 = self.phi0 * eps_prev + self.gamma0 * u
+            # row of δε: φ₀ δε − ∫ε₀ δβ + ∫T δγ (FOH weights a0, a1)
+            self.A[0, 1] = -(self.a0 * eps_prev + self.a1 * self._eps0)
+            if "temp" in self.model:
+                self.A[0, 2] = u
+            self._T = T
+            A = self.A
+        self.k += 1
+        z = y - self._eps0 - self.b0
+        e, f = kf_step(self.x, self.P, A, self.Qd, self.H, self.r, z)
+        return float(e), float(f)
+
+    @property
+    def estimates(self) -> dict[str, tuple[float, float]]:
+        """Current ``name -> (value, std)`` of the estimated parameters."""
+        base = {"markov.beta": self.beta0, "temp.gamma": self.gamma0, "bias.b": self.b0}
+        return {name: (base[name] + float(self.x[i]), float(math.sqrt(max(self.P[i, i], 0.0))))
+                for i, name in enumerate(self.layout) if name in ESTIMATED}
+
+    @property
+    def drift(self) -> float:
+        """Current filtered drift ε̂ = ε₀ + δε (without bias)."""
+        return self._eps0 + float(self.x[0])
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+
+def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> tuple[dict, str]:
+    """Values of the held noise parameters: ``given`` first, else an estimate."""
+    need = [n for n in held_names(model) if n not in given]
+    if not need:
+        return {n: float(given[n]) for n in held_names(model)}, "given"
+    if model.is_single_process:
+        from .lsq import lsq
+
+        r = lsq(samples, model)
+        src = "lsq"
+    else:
+        from .ml import ml
+
+        r = ml(samples, model, fixed={k: v for k, v in given.items() if k in model.param_names},
+               std_errors=False)
+        src = "ml"
+    out = {n: float(given[n]) if n in given else abs(r.value(n)) for n in held_names(model)}
+    if out.get("markov.sigma", 1.0) <= 0:
+        out["markov.sigma"] = float(np.nanstd(np.diff(samples.drift)))
+    return out, src
+
+
+def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
+        gamma0: float = PAPER_POINT, b0: float = 0.0, sigma: float | None = None,
+        held: Mapping[str, float] | None = None, iterate: bool = False, max_iter: int = 30,
+        tol: float = 1e-4, prior_std: Mapping[str, float] | None = None) -> FitResult:
+    """Run the LKF over the samples (single pass, or iterated with ``iterate=True``).
+
+    Args:
+        beta0, gamma0, b0: linearisation point (default: the paper's 1e-4).
+        sigma: the known σ (``markov.sigma``), as in the paper.
+        held: other held values (``white.sigma``, ``random_walk.q``, ...).
+        iterate: re-linearise at the previous estimate until the relative change of every
+            estimate is below ``tol`` (at most ``max_iter`` passes).
+    """
+    layout = lkf_layout(model)
+    given = dict(held or {})
+    if sigma is not None:
+        given["markov.sigma"] = float(sigma)
+    require_samples(samples, samples.n_observed, len(layout) + 2, "lkf")
+    warnings = list(samples.warnings)
+    hv, src = held_values(samples, model, given)
+    if src != "given":
+        warnings.append(f"lkf: noise levels held at the {src} estimate "
+                        f"({', '.join(f'{k}={v:.3g}' for k, v in hv.items())})")
+    y = samples.drift
+    first = int(np.flatnonzero(np.isfinite(y))[0])
+    ps = dict(prior_std) if prior_std else OnlineLKF.default_prior_std(
+        model, samples.dt, float(y[first]), float(samples.temp[0]),
+        float(np.nanstd(y)) + hv["markov.sigma"], float(np.std(samples.temp)))
+    point = {"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}
+    passes = []
+    for it in range(max_iter if iterate else 1):
+        f = OnlineLKF(model, samples.dt, beta0=point["markov.beta"],
+                      gamma0=point["temp.gamma"], b0=point["bias.b"], held=hv, prior_std=ps)
+        run = _run(f, samples)
+        passes.append(dict(point))
+        est = run["final"]
+        new = {k: v[0] for k, v in est.items()}
+        if not iterate:
+            break
+        change = max(abs(new[k] - point[k]) / max(abs(new[k]), 1e-12) for k in new)
+        # safeguard: beta moves at most a factor 10 per pass and stays positive
+        b_old, b_new = point["markov.beta"], new["markov.beta"]
+        if b_new <= 0:
+            warnings.append(f"lkf: pass {it + 1} gave beta <= 0; re-linearised at beta0/3")
+            new["markov.beta"] = b_old / 3
+        else:
+            new["markov.beta"] = min(max(b_new, b_old / 10), b_old * 10)
+        point.update(new)
+        if change < tol:
+            break
+    else:
+        if iterate:
+            warnings.append(f"lkf: iteration did not settle within {max_iter} passes")
+    est = run["final"]
+    if est["markov.beta"][0] <= 0:
+        warnings.append(f"lkf: beta = {est['markov.beta'][0]:.3g} <= 0 (not mean-reverting)")
+    params = {}
+    for n in model.param_names:
+        if n in est:
+            params[n] = Estimate(est[n][0], est[n][1], model.unit(n))
+        else:
+            params[n] = Estimate(hv[n], 0.0, model.unit(n), fixed=True)
+    names = [n for n in layout if n in ESTIMATED]
+    idx = [layout.index(n) for n in names]
+    return FitResult(
+        method="lkf", model=model, parameters=params, loglik=None, residuals=run["e"],
+        residual_var=run["f"], warnings=tuple(dict.fromkeys(warnings)),
+        source=samples.source, n_samples=len(samples), n_observed=samples.n_observed,
+        dt=samples.dt, covariance=run["P"][np.ix_(idx, idx)], cov_names=tuple(names),
+        info={"linearization": passes[-1] if iterate else passes[0], "passes": len(passes),
+              "iterated": iterate, "held_from": src, "first_point": passes[0]},
+        history=run["history"],
+    )
+
+
+def _run(f: OnlineLKF, samples: Samples) -> dict:
+    N = len(samples)
+    e = np.empty(N)
+    fv = np.empty(N)
+    est_names = [n for n in f.layout if n in ESTIMATED]
+    hist = {n: np.empty(N) for n in est_names}
+    hist.update({n + ":std": np.empty(N) for n in est_names})
+    hist["drift"] = np.empty(N)
+    y, T = samples.drift, samples.temp
+    for k in range(N):
+        e[k], fv[k] = f.update(float(y[k]), float(T[k]))
+        for n, (v, s) in f.estimates.items():
+            hist[n][k] = v
+            hist[n + ":std"][k] = s
+        hist["drift"][k] = f.drift
+    return {"e": e, "f": fv, "history": hist, "final": f.estimates, "P": f.covariance}

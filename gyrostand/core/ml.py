@@ -1,0 +1,377 @@
+"""Exact Gaussian maximum likelihood from the Kalman-filter innovations.
+
+The log-likelihood of the samples under a model (prediction-error decomposition,
+Harvey 1989, 3.4):
+
+    ln L = −½ Σ_k [ ln 2π + ln f_k + e_k² / f_k ],   e_k = y_k − ŷ_{k|k−1}
+
+where the filter is the model's exact discretisation. It is maximised over every free
+parameter. Two exact reductions keep the search small and fast:
+
+* the linear parameters θ (``temp.gamma``, ``bias.b``, ...) are concentrated out: the filter
+  is linear in the data, so the innovations of ``y − Xθ`` are ``e_y − E_X θ`` and the
+  best θ is generalised least squares on the filtered columns (de Jong 1991);
+* unless a noise level is fixed (the paper's "σ known"), the common scale of all noise
+  variances is concentrated out too: ``s² = (1/n) Σ e_k²/f̃_k``.
+
+What remains — log rates (β, β₂, ...) and log noise ratios — is searched with L-BFGS-B
+from the best points of a start grid seeded by least squares. Standard errors come from the
+observed information (numerical Hessian of ln L in the natural parameters).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Mapping
+
+import numpy as np
+from scipy.optimize import minimize
+
+from ..errors import IdentificationError, ModelError
+from .data import Samples
+from .kalman import kf_run
+from .model import LOG_2PI, Model, context
+from .results import Estimate, FitResult
+from .validate import require_samples
+
+log = logging.getLogger(__name__)
+
+RATIO_BOUNDS = (1e-6, 1e3)
+
+
+class _Problem:
+    """The concentrated likelihood of one model on one data set."""
+
+    def __init__(self, model: Model, samples: Samples, fixed: Mapping[str, float]):
+        self.model, self.samples, self.fixed = model, samples, dict(fixed)
+        unknown = [k for k in self.fixed if k not in model.param_names]
+        if unknown:
+            raise ModelError(f"cannot fix {', '.join(unknown)}: not a parameter of {model}")
+        self.ctx = context(samples)
+        self.linear = model.names_of_kind("linear")
+        self.lin_free = [n for n in self.linear if n not in self.fixed]
+        self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
+        self.rates = [n for n in model.names_of_kind("rate") if n not in self.fixed]
+        stds = [n for n in model.names_of_kind("std") if n not in self.fixed]
+        fixed_std = [n for n in model.names_of_kind("std") if n in self.fixed]
+        self.concentrate = not fixed_std and bool(stds)
+        if self.concentrate:
+            self.ref = "markov.sigma" if "markov.sigma" in stds else stds[0]
+            self.ref_scale = 1.0
+        else:
+            self.ref = None
+            self.ref_scale = float(self.fixed[fixed_std[0]]) if fixed_std else 1.0
+            if self.ref_scale <= 0:
+                raise ModelError(f"fixed {fixed_std[0]} must be > 0")
+        self.stds = [n for n in stds if n != self.ref]
+        self.znames = self.rates + self.stds
+        dur = max(samples.t[-1] - samples.t[0], 10 * samples.dt)
+        self.duration = dur
+        lo = [np.log(1e-3 / dur)] * len(self.rates) + \
+             [np.log(RATIO_BOUNDS[0] * self.ref_scale)] * len(self.stds)
+        hi = [np.log(5.0 / samples.dt)] * len(self.rates) + \
+             [np.log(RATIO_BOUNDS[1] * self.ref_scale)] * len(self.stds)
+        self.bounds = list(zip(lo, hi, strict=True))
+        self.n_obs = samples.n_observed
+        self.nevals = 0
+
+    def unpack(self, z: np.ndarray) -> dict[str, float]:
+        p = dict(self.fixed)
+        for n, v in zip(self.znames, z, strict=True):
+            p[n] = float(np.exp(v))
+        if self.ref is not None:
+            p[self.ref] = 1.0
+        for n in self.lin_free:
+            p[n] = 0.0
+        return p
+
+    def profile(self, z: np.ndarray):
+        """Concentrated ln L at ``z``; also θ̂, scale s² and the GLS information."""
+        self.nevals += 1
+        p = self.unpack(z)
+        X = self.model.regressors(p, self.ctx)
+        phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
+        Y = np.empty((X.shape[0], 1 + X.shape[1]))
+        Y[:, 0] = self.samples.drift
+        Y[:, 1:] = X
+        _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        if not np.isfinite(slogf):
+            return -np.inf, None
+        # e = E c0 - E_free θ with c0 = [1, -θ_fixed...]: S(θ) = c0'Gc0 - 2 b'θ + θ'Aθ
+        c0 = np.zeros(G.shape[0])
+        c0[0] = 1.0
+        for j, name in enumerate(self.linear):
+            if name in self.fixed:
+                c0[1 + j] = -self.fixed[name]
+        S = float(c0 @ G @ c0)
+        free = self.free_cols
+        if free:
+            A = G[np.ix_(free, free)]
+            b = G[free] @ c0
+            theta, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
+            S -= float(b @ theta)
+        else:
+            A = np.zeros((0, 0))
+            theta = np.zeros(0)
+        S = max(S, 1e-300)
+        if self.concentrate:
+            s2 = S / n
+            ll = -0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + n)
+        else:
+            s2 = 1.0
+            ll = -0.5 * (n * LOG_2PI + slogf + S)
+        return float(ll), (p, theta, s2, A)
+
+    def natural(self, z: np.ndarray) -> tuple[dict[str, float], np.ndarray, float]:
+        """Full parameter dict at ``z`` (scale and θ̂ filled in), GLS info matrix, ln L."""
+        ll, extra = self.profile(z)
+        if extra is None:
+            raise IdentificationError("likelihood is not finite at the optimum")
+        p, theta, s2, A = extra
+        s = float(np.sqrt(s2))
+        if self.concentrate:
+            for n in self.model.names_of_kind("std"):
+                p[n] = p[n] * s
+        for n, v in zip(self.lin_free, theta, strict=True):
+            p[n] = float(v)
+        return p, A / s2, ll
+
+
+def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
+    """Candidate start points: LSQ-seeded β and a few noise ratios per free parameter."""
+    axes = []
+    dur, dt = prob.duration, prob.samples.dt
+    for n in prob.rates:
+        if n == "markov.beta" and beta0 is not None:
+            vals = [beta0, beta0 * 3, beta0 / 3]
+        else:
+            vals = list(np.geomspace(3.0 / dur, 0.3 / dt, 4))
+        axes.append([np.log(v) for v in vals])
+    for n in prob.stds:
+        if n == "white.sigma":
+            rel = [1e-3, 0.1, 1.0]
+        elif n == "random_walk.q":
+            rel = [0.03 / np.sqrt(dur), 0.3 / np.sqrt(dur), 3 / np.sqrt(dur)]
+        else:
+            rel = [0.3, 3.0]
+        axes.append([np.log(v * prob.ref_scale) for v in rel])
+    pts = [np.array(c) for c in itertools.product(*axes)]
+    if len(pts) > 150:
+        rng = np.random.default_rng(0)
+        pts = [pts[i] for i in rng.choice(len(pts), 150, replace=False)]
+    lo = np.array([b[0] for b in prob.bounds])
+    hi = np.array([b[1] for b in prob.bounds])
+    return [np.clip(p, lo + 1e-9, hi - 1e-9) for p in pts]
+
+
+def _lsq_beta(samples: Samples, model: Model) -> float | None:
+    """β from least squares on the single-process part of the model (a start value)."""
+    from .lsq import lsq
+
+    if "markov" not in model:
+        return None
+    base = Model.parse([n for n in model.names if n in ("markov", "temp", "bias")])
+    try:
+        b = lsq(samples, base).value("markov.beta")
+    except Exception:  # noqa: BLE001 - a start value only; ML goes on with its grid
+        return None
+    return b if b > 0 else None
+
+
+def hessian(fun, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Central-difference Hessian of ``fun`` at ``x`` with steps ``h``."""
+    n = x.size
+    H = np.empty((n, n))
+    f0 = fun(x)
+    fp = np.empty(n)
+    fm = np.empty(n)
+    for i in range(n):
+        e = np.zeros(n)
+        e[i] = h[i]
+        fp[i], fm[i] = fun(x + e), fun(x - e)
+        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h[i] ** 2
+    for i in range(n):
+        for j in range(i + 1, n):
+            ei = np.zeros(n)
+            ej = np.zeros(n)
+            ei[i], ej[j] = h[i], h[j]
+            v = (fun(x + ei + ej) - fun(x + ei - ej) - fun(x - ei + ej) + fun(x - ei - ej))
+            H[i, j] = H[j, i] = v / (4 * h[i] * h[j])
+    return H
+
+
+def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray, list[str]]:
+    """Inverse of the observed information −H, kept symmetric positive definite.
+
+    Directions where the likelihood is flat or curved the wrong way are clipped to a tiny
+    curvature (a huge variance) and reported.
+    """
+    J = -0.5 * (H + H.T)
+    scale = np.sqrt(np.abs(np.diag(J)))
+    scale[scale == 0] = 1.0
+    Jn = J / np.outer(scale, scale)
+    lam, V = np.linalg.eigh(Jn)
+    warnings = []
+    floor = max(lam.max(), 1.0) * 1e-10
+    if lam.min() <= floor:
+        bad = V[:, lam <= floor]
+        involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
+        warnings.append(
+            "the likelihood is flat along a combination of "
+            f"{', '.join(involved)}: not identifiable from these data (their stds are huge)"
+        )
+        lam = np.maximum(lam, floor)
+    cov = (V / lam) @ V.T / np.outer(scale, scale)
+    return 0.5 * (cov + cov.T), warnings
+
+
+def ml(samples: Samples, model: Model, *, sigma: float | None = None,
+       fixed: Mapping[str, float] | None = None, n_local: int = 2,
+       start: Mapping[str, float] | None = None, std_errors: bool = True) -> FitResult:
+    """Exact maximum-likelihood fit of every free parameter of ``model``.
+
+    Args:
+        sigma: fix ``markov.sigma`` (the paper's "σ known"); same as ``fixed``.
+        fixed: parameters held at given values.
+        n_local: how many of the best grid starts get a local optimisation.
+        start: extra start point (natural parameter values, e.g. a previous fit).
+        std_errors: compute standard errors from the observed information.
+    """
+    fixed = dict(fixed or {})
+    if sigma is not None:
+        fixed["markov.sigma"] = float(sigma)
+    prob = _Problem(model, samples, fixed)
+    n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
+    require_samples(samples, samples.n_observed, n_free + 2, "ml")
+    warnings = list(samples.warnings)
+
+    def obj(z: np.ndarray) -> float:
+        ll, _ = prob.profile(z)
+        return -ll / prob.n_obs if np.isfinite(ll) else 1e10
+
+    starts = _start_grid(prob, _lsq_beta(samples, model))
+    if start:
+        z0 = []
+        for n in prob.znames:
+            v = start[n] / (start.get(prob.ref, 1.0) if prob.ref and n in prob.stds else 1.0)
+            z0.append(np.log(max(v, 1e-300)))
+        starts.append(np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds]))
+    at_bound: list[str] = []
+    if prob.znames:
+        vals = [obj(z) for z in starts]
+        order = np.argsort(vals)
+        best = None
+        for i in order[:max(1, n_local)]:
+            res = minimize(obj, starts[i], method="L-BFGS-B", bounds=prob.bounds,
+                           options={"maxiter": 500, "ftol": 1e-13, "gtol": 1e-9})
+            if best is None or res.fun < best.fun - 1e-12:
+                best = res
+        assert best is not None
+        z = best.x
+        if not best.success:
+            warnings.append(f"ml: optimiser did not report convergence ({best.message})")
+        for name, v, (lo, hi) in zip(prob.znames, z, prob.bounds, strict=True):
+            if v <= lo + 1e-3 or v >= hi - 1e-3:
+                at_bound.append(name)
+                side = "lower" if v <= lo + 1e-3 else "upper"
+                what = ("≈ 0: no measurable contribution" if side == "lower" and
+                        model.kind(name) == "std" else "at the edge of its plausible range")
+                warnings.append(f"ml: {name} is at its {side} search bound ({what})")
+        info = {"iterations": int(best.nit), "converged": bool(best.success)}
+    else:
+        z = np.zeros(0)
+        info = {"iterations": 0, "converged": True}
+    p, gls_info, ll_prof = prob.natural(z)
+    loglik = model.loglik(p, samples)
+    if not np.isfinite(loglik):
+        raise IdentificationError(f"{samples.source}: ml found no finite likelihood")
+    free = [n for n in model.param_names if n not in fixed]
+    cov = None
+    std = dict.fromkeys(free, 0.0)
+    if std_errors and free:
+        cov, cw = _observed_covariance(model, samples, p, free, gls_info, prob,
+                                       at_bound)
+        warnings += cw
+        std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
+    params = {}
+    for n in model.param_names:
+        if n in fixed:
+            params[n] = Estimate(float(fixed[n]), 0.0, model.unit(n), fixed=True)
+        else:
+            params[n] = Estimate(float(p[n]), std[n], model.unit(n))
+    e, f = model.innovations(p, samples)
+    info.update({"evaluations": prob.nevals, "concentrated_scale": prob.concentrate,
+                 "start_points": len(starts)})
+    return FitResult(
+        method="ml", model=model, parameters=params, loglik=float(loglik), residuals=e,
+        residual_var=f, warnings=tuple(dict.fromkeys(warnings)), source=samples.source,
+        n_samples=len(samples), n_observed=samples.n_observed, dt=samples.dt,
+        covariance=cov, cov_names=tuple(free) if cov is not None else (), info=info,
+    )
+
+
+def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
+                         gls_info: np.ndarray, prob: _Problem, at_bound: list[str]):
+    """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
+
+    A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
+    maximum: the others' covariance is then taken with it held at its estimate, and its
+    own std is the inverse curvature along it alone.
+    """
+    x0 = np.array([p[n] for n in free])
+    noise_scale = max(p[n] for n in model.names_of_kind("std"))
+    lin_std = {}
+    if gls_info.size:
+        ginv = np.linalg.pinv(gls_info)
+        lin_std = {n: float(np.sqrt(max(ginv[i, i], 0.0))) for i, n in enumerate(prob.lin_free)}
+    h = np.empty(x0.size)
+    for i, n in enumerate(free):
+        kind = model.kind(n)
+        if kind == "linear":
+            h[i] = 0.1 * lin_std.get(n, 0.0) or 1e-4 * max(abs(x0[i]), 1.0)
+        elif kind == "std":
+            h[i] = 1e-2 * max(abs(x0[i]), 0.1 * noise_scale)
+        else:
+            h[i] = 1e-3 * abs(x0[i])
+
+    def ll(x: np.ndarray) -> float:
+        q = dict(p)
+        for n, v in zip(free, x, strict=True):
+            q[n] = float(v)
+        for n in free:
+            if model.kind(n) == "rate" and q[n] <= 0:
+                return -np.inf
+        return model.loglik(q, samples)
+
+    warnings: list[str] = []
+    # a noise level whose removal costs no likelihood is at its boundary (≈ 0) too
+    ll0 = ll(x0)
+    at_bound = list(at_bound)
+    for i, n in enumerate(free):
+        if model.kind(n) == "std" and n not in at_bound:
+            x = x0.copy()
+            x[i] = 0.0
+            if ll0 - ll(x) < 1e-3:
+                at_bound.append(n)
+    for _ in range(2):
+        H = hessian(ll, x0, h)
+        if not np.all(np.isfinite(H)):
+            H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)
+        inner = [i for i, n in enumerate(free) if n not in at_bound]
+        cov = np.zeros((len(free), len(free)))
+        sub, warnings = covariance_from_hessian(H[np.ix_(inner, inner)], [free[i] for i in inner])
+        cov[np.ix_(inner, inner)] = sub
+        for i, n in enumerate(free):
+            if n in at_bound:
+                cov[i, i] = 1.0 / max(-H[i, i], 1e-300) if -H[i, i] > 0 else (0.1 * noise_scale) ** 2
+        sd = np.sqrt(np.diag(cov))
+        new_h = 0.1 * sd
+        for i, n in enumerate(free):
+            if model.kind(n) == "rate":
+                new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
+            elif model.kind(n) == "std":
+                new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))
+            new_h[i] = max(new_h[i], 1e-9 * max(abs(x0[i]), 1e-12))
+        h = new_h
+    return cov, warnings

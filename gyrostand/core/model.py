@@ -1,0 +1,167 @@
+"""A drift model: an immutable list of named terms that compiles to a state space.
+
+>>> m = Model.parse("markov,temp,bias")
+>>> m.names
+('markov', 'temp', 'white', 'bias')
+>>> m.param_names
+('markov.beta', 'markov.sigma', 'temp.gamma', 'white.sigma', 'bias.b')
+>>> m.add("random_walk").names
+('markov', 'temp', 'white', 'bias', 'random_walk')
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..errors import ModelError
+from .data import Samples
+from .kalman import kf_innovations
+from .terms import TERMS, VOCABULARY, Context, Param, Term
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class Model:
+    """Immutable model spec. Build with :meth:`parse`; ``white`` is always included."""
+
+    terms: tuple[Term, ...]
+
+    @classmethod
+    def parse(cls, spec: str | Iterable[str]) -> Model:
+        """From ``"markov,temp,bias"`` or a list of term names (order does not matter)."""
+        names = [s.strip() for s in spec.split(",")] if isinstance(spec, str) else list(spec)
+        names = [n for n in names if n]
+        seen: set[str] = set()
+        for n in names:
+            if n not in VOCABULARY:
+                raise ModelError(
+                    f"unknown model term {n!r}; the vocabulary is: {', '.join(VOCABULARY)}"
+                )
+            if n in seen:
+                raise ModelError(f"model term {n!r} is listed twice")
+            seen.add(n)
+            if n not in TERMS:
+                raise ModelError(f"model term {n!r} is not implemented in this version")
+        seen.add("white")
+        for n in seen:
+            for req in TERMS[n].requires:
+                if req not in seen:
+                    raise ModelError(f"model term {n!r} needs {req!r} (it is an input of it)")
+        if not any(TERMS[n].n_states for n in seen):
+            raise ModelError(
+                "a model needs at least one stochastic drift term (markov, random_walk or markov2)"
+            )
+        ordered = [n for n in VOCABULARY if n in seen]
+        return cls(tuple(TERMS[n]() for n in ordered))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.terms)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names
+
+    def __str__(self) -> str:
+        return ",".join(self.names)
+
+    def add(self, *names: str) -> Model:
+        """A new model with the given terms added."""
+        dup = [n for n in names if n in self.names]
+        if dup:
+            raise ModelError(f"model already has term(s) {', '.join(dup)}")
+        return Model.parse(list(self.names) + list(names))
+
+    def remove(self, *names: str) -> Model:
+        """A new model without the given terms (``white`` cannot be removed)."""
+        for n in names:
+            if n not in self.names:
+                raise ModelError(f"model has no term {n!r} to remove")
+            if n == "white":
+                raise ModelError("'white' (measurement noise) is always part of the model")
+        return Model.parse([n for n in self.names if n not in names])
+
+    # ---- parameters -------------------------------------------------------------------
+    @cached_property
+    def params(self) -> tuple[tuple[str, Param], ...]:
+        return tuple((t.key(p.name), p) for t in self.terms for p in t.params)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(n for n, _ in self.params)
+
+    def kind(self, name: str) -> str:
+        return dict(self.params)[name].kind
+
+    def unit(self, name: str) -> str:
+        return dict(self.params)[name].unit
+
+    def names_of_kind(self, kind: str) -> tuple[str, ...]:
+        return tuple(n for n, p in self.params if p.kind == kind)
+
+    @property
+    def n_states(self) -> int:
+        return sum(t.n_states for t in self.terms)
+
+    @property
+    def is_single_process(self) -> bool:
+        """True when the drift has one random process (what least squares can represent)."""
+        return self.n_states == 1 and "markov" in self.names
+
+    # ---- compilation ------------------------------------------------------------------
+    def check_params(self, p: Mapping[str, float]) -> None:
+        missing = [n for n in self.param_names if n not in p]
+        if missing:
+            raise ModelError(f"missing parameter value(s): {', '.join(missing)}")
+
+    def regressors(self, p: Mapping[str, float], ctx: Context) -> np.ndarray:
+        """Regressor matrix, shape (N, n_linear), columns in ``names_of_kind('linear')``."""
+        cols: dict[str, np.ndarray] = {}
+        for t in self.terms:
+            cols.update(t.regressors(p, ctx))
+        lin = self.names_of_kind("linear")
+        if not lin:
+            return np.zeros((ctx.t.size, 0))
+        return np.column_stack([cols[n] for n in lin])
+
+    def stochastic(self, p: Mapping[str, float], dt: float):
+        """``(phi, q, p0, r)``: the diagonal state space of the random part."""
+        st = [s for t in self.terms for s in t.states(p, dt)]
+        arr = np.array(st, dtype=float).reshape(-1, 3)
+        r = sum(t.measurement_var(p) for t in self.terms)
+        return (np.ascontiguousarray(arr[:, 0]), np.ascontiguousarray(arr[:, 1]),
+                np.ascontiguousarray(arr[:, 2]), float(r))
+
+    def filter_columns(self, p: Mapping[str, float], samples: Samples, X: np.ndarray):
+        """Innovations of ``[y, X]`` through the model's Kalman filter: ``(E, f)``."""
+        phi, q, p0, r = self.stochastic(p, samples.dt)
+        Y = np.empty((len(samples), 1 + X.shape[1]))
+        Y[:, 0] = samples.drift
+        Y[:, 1:] = X
+        return kf_innovations(phi, q, p0, r, Y)
+
+    def innovations(self, p: Mapping[str, float], samples: Samples):
+        """One-step innovations ``e`` and their variances ``f`` at the parameters ``p``."""
+        self.check_params(p)
+        ctx = context(samples)
+        X = self.regressors(p, ctx)
+        E, f = self.filter_columns(p, samples, X)
+        theta = np.array([p[n] for n in self.names_of_kind("linear")])
+        e = E[:, 0] - E[:, 1:] @ theta if theta.size else E[:, 0].copy()
+        return e, f
+
+    def loglik(self, p: Mapping[str, float], samples: Samples) -> float:
+        """Exact Gaussian log-likelihood of the samples (prediction-error decomposition)."""
+        e, f = self.innovations(p, samples)
+        ok = np.isfinite(e)
+        if np.any(f[ok] <= 0):
+            return -np.inf
+        return float(-0.5 * np.sum(LOG_2PI + np.log(f[ok]) + e[ok] ** 2 / f[ok]))
+
+
+def context(samples: Samples) -> Context:
+    return Context(t=np.asarray(samples.t), temp=np.asarray(samples.temp), dt=samples.dt)
