@@ -1,0 +1,490 @@
+"""YAML session configuration: loaded with ``yaml.safe_load``, validated at load, frozen.
+
+Every problem is a :class:`~gyrostand.errors.ConfigError` whose message starts with the file
+and the key path, e.g.::
+
+    configs/demo.yaml: gyros[1].drift.signal: 'Drft' is not a signal of message
+    GYRO_DRIFT_1 in dbc/gyrostand.dbc (known: Drift, Counter)
+
+Unknown keys are errors. Relative paths (``dbc``, ``session.output``) resolve against the
+folder of the config file. Messages are named by DBC name or frame id (int, e.g. ``0x100``;
+add ``extended: true/false`` when a DBC has both kinds with that id); signals are resolved
+in the DBC at load, including signals under a multiplexer. Shape (``simulate`` and
+``responses`` optional; see ``configs/demo.yaml`` for every key)::
+
+    session: {name: run-42, output: runs}
+    bus: {interface: virtual, channel: stand0}     # passed to can.Bus as is
+    dbc: dbc/gyrostand.dbc
+    sampling: {dt: 1.0}
+    gyros:
+      - name: az
+        drift: {message: GYRO_DRIFT_1, signal: Drift, counter: Counter}
+        temperature: {message: GYRO_TEMP_1, signal: Temperature}
+        model: [markov, temp, bias]
+        identifiers: [lkf, lsq]
+        result: {message: GS_RESULT_1, summary: GS_SUMMARY_1}
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from gyrostand.can.dbc import MessageRef, SignalRef, find_message, find_signal, load_dbc
+from gyrostand.errors import CanEdgeError, ConfigError
+
+__all__ = [
+    "MODEL_TERMS",
+    "IDENTIFIERS",
+    "ChannelConfig",
+    "ResultConfig",
+    "GyroConfig",
+    "SamplingConfig",
+    "ResponsesConfig",
+    "SimGyroConfig",
+    "SimulateConfig",
+    "SessionConfig",
+    "load_config",
+    "parse_config",
+]
+
+log = logging.getLogger(__name__)
+
+#: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
+MODEL_TERMS = (
+    "markov", "temp", "white", "bias", "temp2", "temp_lag", "temp_rate", "hysteresis",
+    "trend", "warmup", "random_walk", "markov2",
+)
+IDENTIFIERS = ("lkf", "lsq", "ml")
+
+#: Signals the daemon writes or reads in its own response/command messages.
+RESULT_SIGNALS = ("Kind", "Identifier", "Param", "Value", "Std", "NParams", "Counter")
+SUMMARY_SIGNALS = ("Identifier", "Status", "ModelTerms", "Samples", "ResidualRms")
+STATUS_SIGNALS = ("Page", "Counter", "State", "Bins", "Gaps", "FramesDecoded",
+                  "FramesRejected", "BusErrors", "LateFrames")
+COMMAND_SIGNALS = ("Command", "Sequence")
+ACK_SIGNALS = ("Command", "Sequence", "Result", "Reason")
+
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
+MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 1000.0
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """One measured channel: the DBC signal carrying it and, optionally, its rolling counter."""
+
+    signal: SignalRef
+    counter: SignalRef | None = None
+
+
+@dataclass(frozen=True)
+class ResultConfig:
+    """Messages the daemon sends a gyro's results in (see ``dbc/README.md``)."""
+
+    values: MessageRef
+    summary: MessageRef | None = None
+
+
+@dataclass(frozen=True)
+class GyroConfig:
+    name: str
+    drift: ChannelConfig
+    temperature: ChannelConfig
+    model: tuple[str, ...]
+    identifiers: tuple[str, ...]
+    result: ResultConfig | None = None
+
+
+@dataclass(frozen=True)
+class SamplingConfig:
+    """Binning: ``dt`` bin width (s); ``epoch`` bin grid origin (s, None: the first frame's
+    timestamp floored to a multiple of dt); ``buffer`` capacity of the decoded-sample buffer
+    (samples); ``max_gap`` largest forward jump of frame time accepted (s)."""
+
+    dt: float = 1.0
+    epoch: float | None = None
+    buffer: int = 65536
+    max_gap: float = 3600.0
+
+
+@dataclass(frozen=True)
+class ResponsesConfig:
+    """Frames the daemon sends and the command channel it listens to. ``period`` (s) between
+    result rounds and ``heartbeat`` (s) between status frames, in frame time; ``node`` is
+    this daemon's id in the command's ``Target`` (255 addresses every daemon)."""
+
+    period: float = 10.0
+    heartbeat: float = 1.0
+    status: MessageRef | None = None
+    ack: MessageRef | None = None
+    command: MessageRef | None = None
+    node: int = 1
+
+
+@dataclass(frozen=True)
+class SimGyroConfig:
+    """True model of a simulated gyro: terms and ``<term>.<param>`` values."""
+
+    model: tuple[str, ...]
+    params: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class SimulateConfig:
+    """Stand simulator: temperature breakpoints ``(t s, T degC)``, linear between; frame
+    rates (Hz); uniform timestamp jitter half-width (s); drop probability; sensor
+    quantization step (physical units, 0 = only the DBC's resolution); ``start`` absolute
+    timestamp of t = 0 (s since the Unix epoch: BLF stores absolute time)."""
+
+    temperature: tuple[tuple[float, float], ...]
+    gyros: Mapping[str, SimGyroConfig]
+    seed: int = 0
+    start: float = 1_700_000_000.0
+    duration: float | None = None
+    drift_rate: float = 100.0
+    temperature_rate: float = 10.0
+    interpolation: str = "hold"
+    jitter: float = 0.0
+    drop: float = 0.0
+    drift_quantization: float = 0.0
+    temperature_quantization: float = 0.0
+    realtime: bool = False
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """A validated session. ``db`` is the loaded cantools database (not compared)."""
+
+    path: Path
+    name: str
+    output: Path
+    bus: Mapping[str, Any]
+    dbc_path: Path
+    sampling: SamplingConfig
+    gyros: tuple[GyroConfig, ...]
+    responses: ResponsesConfig
+    simulate: SimulateConfig | None = None
+    db: Any = field(default=None, repr=False, compare=False)
+
+    def gyro(self, name: str) -> GyroConfig:
+        for g in self.gyros:
+            if g.name == name:
+                return g
+        raise KeyError(name)
+
+
+def load_config(path: str | Path) -> SessionConfig:
+    """Read and validate a YAML session file. Raises :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}") from exc
+    return parse_config(data, source=path, base_dir=path.resolve().parent)
+
+
+def parse_config(data: Any, source: str | Path = "<config>",
+                 base_dir: str | Path | None = None) -> SessionConfig:
+    """Validate an already parsed mapping (``base_dir`` resolves relative paths)."""
+    return _Parser(str(source), Path(base_dir) if base_dir else Path.cwd()).session(data)
+
+
+class _Parser:
+    def __init__(self, source: str, base_dir: Path) -> None:
+        self.source = source
+        self.base = base_dir
+        self.db: Any = None
+        self.dbc_name = "DBC"
+
+    # -- helpers ---------------------------------------------------------------------
+    def fail(self, path: str, msg: str) -> ConfigError:
+        return ConfigError(f"{self.source}: {path}: {msg}")
+
+    def mapping(self, value: Any, path: str, required: tuple[str, ...],
+                optional: tuple[str, ...]) -> dict[str, Any]:
+        if not isinstance(value, Mapping):
+            raise self.fail(path, f"expected a mapping, got {_kind(value)}")
+        unknown = [k for k in value if k not in required and k not in optional]
+        if unknown:
+            allowed = ", ".join(required + optional)
+            raise self.fail(_join(path, str(unknown[0])),
+                            f"unknown key (allowed here: {allowed})")
+        for k in required:
+            if k not in value:
+                raise self.fail(_join(path, k), "missing required key")
+        return dict(value)
+
+    def number(self, value: Any, path: str, *, lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(path, f"expected a number, got {_kind(value)}")
+        x = float(value)
+        if not math.isfinite(x):
+            raise self.fail(path, f"must be finite, got {value!r}")
+        if lo is not None and (x < lo or (lo_open and x == lo)):
+            raise self.fail(path, f"must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+        if hi is not None and x > hi:
+            raise self.fail(path, f"must be <= {hi:g}, got {value!r}")
+        return x
+
+    def integer(self, value: Any, path: str, lo: int | None = None,
+                hi: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(path, f"expected an integer, got {_kind(value)}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(path, f"must be in [{lo}, {hi}], got {value}")
+        return value
+
+    def string(self, value: Any, path: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.fail(path, f"expected a non-empty string, got {_kind(value)}")
+        return value
+
+    def names(self, value: Any, path: str, vocabulary: tuple[str, ...]) -> tuple[str, ...]:
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",")]
+        if not isinstance(value, list) or not value:
+            raise self.fail(path, f"expected a non-empty list, got {_kind(value)}")
+        out: list[str] = []
+        for i, v in enumerate(value):
+            if v not in vocabulary:
+                raise self.fail(f"{path}[{i}]", f"{v!r} is not one of: {', '.join(vocabulary)}")
+            if v in out:
+                raise self.fail(f"{path}[{i}]", f"{v!r} is listed twice")
+            out.append(v)
+        return tuple(out)
+
+    def message(self, value: Any, path: str) -> MessageRef:
+        ref, extended = value, None
+        if isinstance(value, Mapping):
+            m = self.mapping(value, path, ("message",), ("extended",))
+            ref, extended = m["message"], self.boolean(m.get("extended"), f"{path}.extended")
+            path = f"{path}.message"
+        try:
+            return find_message(self.db, ref, extended, source=self.dbc_name)[0]
+        except CanEdgeError as exc:
+            raise self.fail(path, str(exc)) from None
+
+    def boolean(self, value: Any, path: str) -> bool | None:
+        if value is None or isinstance(value, bool):
+            return value
+        raise self.fail(path, f"expected true or false, got {_kind(value)}")
+
+    def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...]) -> None:
+        have = {s.name for s in self.db.get_message_by_name(ref.name).signals}
+        missing = [s for s in needed if s not in have]
+        if missing:
+            raise self.fail(path, f"message {ref.name} lacks signal(s) {', '.join(missing)} "
+                                  f"needed here (see dbc/README.md)")
+
+    # -- sections --------------------------------------------------------------------
+    def session(self, data: Any) -> SessionConfig:
+        top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
+                           ("sampling", "responses", "simulate"))
+        sess = self.mapping(top["session"], "session", ("name",), ("output",))
+        name = self.string(sess["name"], "session.name")
+        if not _NAME_RE.match(name):
+            raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
+        output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
+        bus = top["bus"]
+        if not isinstance(bus, Mapping) or not bus:
+            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
+        if "interface" not in bus:
+            raise self.fail("bus.interface", "missing required key")
+        self.string(bus["interface"], "bus.interface")
+        self.dbc_name = self.string(top["dbc"], "dbc")
+        dbc_path = (self.base / self.dbc_name).resolve()
+        try:
+            self.db = load_dbc(dbc_path)
+        except CanEdgeError as exc:
+            raise self.fail("dbc", str(exc)) from None
+        sampling = self.sampling(top.get("sampling", {}))
+        gyros_raw = top["gyros"]
+        if not isinstance(gyros_raw, list) or not gyros_raw:
+            raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
+        gyros = tuple(self.gyro(g, f"gyros[{i}]") for i, g in enumerate(gyros_raw))
+        seen: dict[str, int] = {}
+        for i, g in enumerate(gyros):
+            if g.name in seen:
+                raise self.fail(f"gyros[{i}].name", f"{g.name!r} repeats gyros[{seen[g.name]}]")
+            seen[g.name] = i
+        self.check_channel_clashes(gyros)
+        responses = self.responses(top.get("responses", {}))
+        simulate = None
+        if top.get("simulate") is not None:
+            simulate = self.simulate(top["simulate"], [g.name for g in gyros])
+        return SessionConfig(
+            path=Path(self.source), name=name, output=output,
+            bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
+            gyros=gyros, responses=responses, simulate=simulate, db=self.db,
+        )
+
+    def sampling(self, value: Any) -> SamplingConfig:
+        m = self.mapping(value, "sampling", (), ("dt", "epoch", "buffer", "max_gap"))
+        dt = self.number(m.get("dt", 1.0), "sampling.dt", lo=0.0, lo_open=True)
+        epoch = m.get("epoch")
+        if epoch is not None:
+            epoch = self.number(epoch, "sampling.epoch")
+        buffer = self.integer(m.get("buffer", 65536), "sampling.buffer", 16, 100_000_000)
+        max_gap = self.number(m.get("max_gap", 3600.0), "sampling.max_gap", lo=dt)
+        return SamplingConfig(dt, epoch, buffer, max_gap)
+
+    def channel(self, value: Any, path: str) -> ChannelConfig:
+        m = self.mapping(value, path, ("message", "signal"), ("extended", "counter"))
+        ext = self.boolean(m.get("extended"), f"{path}.extended")
+        msg = self.message({"message": m["message"], "extended": ext}, path)
+        sig = self.string(m["signal"], f"{path}.signal")
+        try:
+            ref = find_signal(self.db, msg.name, sig, source=self.dbc_name)
+        except CanEdgeError as exc:
+            raise self.fail(f"{path}.signal", str(exc)) from None
+        counter = None
+        if m.get("counter") is not None:
+            cname = self.string(m["counter"], f"{path}.counter")
+            try:
+                counter = find_signal(self.db, msg.name, cname, source=self.dbc_name)
+            except CanEdgeError as exc:
+                raise self.fail(f"{path}.counter", str(exc)) from None
+        return ChannelConfig(ref, counter)
+
+    def gyro(self, value: Any, path: str) -> GyroConfig:
+        m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
+                         ("identifiers", "result"))
+        name = self.string(m["name"], f"{path}.name")
+        if not _NAME_RE.match(name):
+            raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
+        drift = self.channel(m["drift"], f"{path}.drift")
+        temp = self.channel(m["temperature"], f"{path}.temperature")
+        model = self.names(m["model"], f"{path}.model", MODEL_TERMS)
+        idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
+                            IDENTIFIERS)
+        result = None
+        if m.get("result") is not None:
+            r = self.mapping(m["result"], f"{path}.result", ("message",), ("summary",))
+            values = self.message(r["message"], f"{path}.result.message")
+            self.require_signals(values, f"{path}.result.message", RESULT_SIGNALS)
+            summary = None
+            if r.get("summary") is not None:
+                summary = self.message(r["summary"], f"{path}.result.summary")
+                self.require_signals(summary, f"{path}.result.summary", SUMMARY_SIGNALS)
+            result = ResultConfig(values, summary)
+        return GyroConfig(name, drift, temp, model, idents, result)
+
+    def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
+        owner: dict[tuple[int, str], str] = {}
+        for i, g in enumerate(gyros):
+            for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
+                key = (c.signal.message.key, c.signal.name)
+                path = f"gyros[{i}].{ch}.signal"
+                if key in owner:
+                    raise self.fail(path, f"{c.signal.message.name}.{c.signal.name} is already "
+                                          f"mapped by {owner[key]}")
+                owner[key] = path
+
+    def responses(self, value: Any) -> ResponsesConfig:
+        m = self.mapping(value, "responses", (),
+                         ("period", "heartbeat", "status", "ack", "command", "node"))
+        period = self.number(m.get("period", 10.0), "responses.period", lo=0.0, lo_open=True)
+        beat = self.number(m.get("heartbeat", 1.0), "responses.heartbeat", lo=0.0,
+                           lo_open=True)
+        refs: dict[str, MessageRef | None] = {}
+        for key, needed in (("status", STATUS_SIGNALS), ("ack", ACK_SIGNALS),
+                            ("command", COMMAND_SIGNALS)):
+            refs[key] = None
+            if m.get(key) is not None:
+                refs[key] = self.message(m[key], f"responses.{key}")
+                self.require_signals(refs[key], f"responses.{key}", needed)  # type: ignore[arg-type]
+        node = self.integer(m.get("node", 1), "responses.node", 0, 254)
+        return ResponsesConfig(period, beat, refs["status"], refs["ack"], refs["command"], node)
+
+    def simulate(self, value: Any, gyro_names: list[str]) -> SimulateConfig:
+        p = "simulate"
+        m = self.mapping(value, p, ("temperature", "gyros"),
+                         ("seed", "start", "duration", "rates", "interpolation", "jitter",
+                          "drop", "quantization", "realtime"))
+        pts = m["temperature"]
+        if not isinstance(pts, list) or len(pts) < 2:
+            raise self.fail(f"{p}.temperature", "expected a list of at least 2 [t, T] points")
+        bps: list[tuple[float, float]] = []
+        for i, pt in enumerate(pts):
+            q = f"{p}.temperature[{i}]"
+            if not isinstance(pt, list) or len(pt) != 2:
+                raise self.fail(q, f"expected [t, T] (s, degC), got {pt!r}")
+            t = self.number(pt[0], q, lo=0.0)
+            if bps and t <= bps[-1][0]:
+                raise self.fail(q, f"times must increase, {t:g} after {bps[-1][0]:g}")
+            bps.append((t, self.number(pt[1], q, lo=-273.15)))
+        if bps[0][0] != 0.0:
+            raise self.fail(f"{p}.temperature[0]", "the profile must start at t = 0")
+        rates = self.mapping(m.get("rates", {}), f"{p}.rates", (), ("drift", "temperature"))
+        r_drift = self.number(rates.get("drift", 100.0), f"{p}.rates.drift",
+                              lo=MIN_RATE_HZ, hi=MAX_RATE_HZ)
+        r_temp = self.number(rates.get("temperature", 10.0), f"{p}.rates.temperature",
+                             lo=MIN_RATE_HZ, hi=MAX_RATE_HZ)
+        jitter = self.number(m.get("jitter", 0.0), f"{p}.jitter", lo=0.0)
+        if jitter >= 0.5 / max(r_drift, r_temp):
+            raise self.fail(f"{p}.jitter", f"{jitter:g} s must stay below half the shortest "
+                            f"frame period ({0.5 / max(r_drift, r_temp):g} s)")
+        interp = m.get("interpolation", "hold")
+        if interp not in ("hold", "linear"):
+            raise self.fail(f"{p}.interpolation", f"{interp!r} is not one of: hold, linear")
+        quant = self.mapping(m.get("quantization", {}), f"{p}.quantization", (),
+                             ("drift", "temperature"))
+        duration = m.get("duration")
+        if duration is not None:
+            duration = self.number(duration, f"{p}.duration", lo=0.0, lo_open=True)
+        sim_gyros = self.mapping(m["gyros"], f"{p}.gyros", (), tuple(gyro_names))
+        truths: dict[str, SimGyroConfig] = {}
+        for gname, spec in sim_gyros.items():
+            q = f"{p}.gyros.{gname}"
+            s = self.mapping(spec, q, ("model", "params"), ())
+            model = self.names(s["model"], f"{q}.model", MODEL_TERMS)
+            params = self.mapping(s["params"], f"{q}.params", (), tuple(s["params"] or ()))
+            vals: dict[str, float] = {}
+            for k, v in params.items():
+                mt = _PARAM_RE.match(str(k))
+                if not mt or mt.group(1) not in MODEL_TERMS:
+                    raise self.fail(f"{q}.params.{k}", "expected '<term>.<param>' with a term "
+                                    f"of: {', '.join(MODEL_TERMS)}")
+                if mt.group(1) not in model:
+                    raise self.fail(f"{q}.params.{k}", f"term {mt.group(1)!r} is not in "
+                                    f"{q}.model")
+                vals[str(k)] = self.number(v, f"{q}.params.{k}")
+            truths[gname] = SimGyroConfig(model, MappingProxyType(vals))
+        return SimulateConfig(
+            temperature=tuple(bps), gyros=MappingProxyType(truths),
+            seed=self.integer(m.get("seed", 0), f"{p}.seed", 0, 2**63 - 1),
+            start=self.number(m.get("start", 1_700_000_000.0), f"{p}.start", lo=0.0),
+            duration=duration, drift_rate=r_drift, temperature_rate=r_temp,
+            interpolation=interp, jitter=jitter,
+            drop=self.number(m.get("drop", 0.0), f"{p}.drop", lo=0.0, hi=0.99),
+            drift_quantization=self.number(quant.get("drift", 0.0),
+                                           f"{p}.quantization.drift", lo=0.0),
+            temperature_quantization=self.number(quant.get("temperature", 0.0),
+                                                 f"{p}.quantization.temperature", lo=0.0),
+            realtime=bool(self.boolean(m.get("realtime", False), f"{p}.realtime")),
+        )
+
+
+def _join(path: str, key: str) -> str:
+    return key if path == "<top>" else f"{path}.{key}"
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "nothing"
+    return f"{type(value).__name__} {value!r}" if not isinstance(value, (dict, list)) \
+        else type(value).__name__
