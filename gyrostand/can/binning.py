@@ -1,0 +1,206 @@
+"""Bins of Δt from frame timestamps, and the ``samples.csv`` writer.
+
+Bin k covers ``[t0 + k·Δt, t0 + (k+1)·Δt)``; ``t0`` is the configured epoch, or else the
+first timestamp seen (any gyro) floored to a multiple of Δt, so every gyro shares one grid.
+Each gyro's series starts at the bin of its own first sample. A bin holds the mean and the
+count of each channel; it closes when a sample of that gyro with a later bin index arrives,
+or on :meth:`Binner.flush`. Bins skipped over are emitted as gaps (NaN mean, count 0): data
+are never invented. A sample whose bin is already closed is *late*: counted and dropped,
+so each gyro's series is strictly increasing in k and closed bins never change.
+
+A record's ``t`` is the **start** of its bin, ``t0 + k·Δt`` (s), and ``drift``/``temp`` are
+the plain means of the samples in ``[t, t + Δt)``.
+
+Work per sample is constant; closing bins costs one record per bin (gaps included), and a
+forward jump of more than ``max_gap`` seconds is refused (counted as ``jumps``) so a wild
+timestamp cannot emit millions of gap rows.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple, TextIO
+
+from gyrostand.errors import DataError
+
+__all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS"]
+
+log = logging.getLogger(__name__)
+
+SAMPLES_COLUMNS = ("t", "drift", "temp", "n_drift", "n_temp")
+
+
+class Bin(NamedTuple):
+    """One closed bin of one gyro. ``t`` start of the bin (s), ``k`` its index on the grid,
+    ``drift`` mean drift (DBC unit, deg/h) and ``temp`` mean temperature (degC), NaN when
+    the matching count is 0."""
+
+    gyro: str
+    t: float
+    k: int
+    drift: float
+    temp: float
+    n_drift: int
+    n_temp: int
+
+    @property
+    def is_gap(self) -> bool:
+        return self.n_drift == 0 or self.n_temp == 0
+
+
+@dataclass(frozen=True)
+class BinStats:
+    """``bins`` closed (gaps included), ``gaps`` bins with an empty channel, ``late``
+    samples dropped because their bin was closed, ``jumps`` samples refused for a forward
+    jump beyond ``max_gap``."""
+
+    bins: int
+    gaps: int
+    late: int
+    jumps: int
+
+
+class _Open:
+    __slots__ = ("k", "s0", "n0", "s1", "n1")
+
+    def __init__(self, k: int) -> None:
+        self.k = k
+        self.s0 = self.s1 = 0.0
+        self.n0 = self.n1 = 0
+
+
+class Binner:
+    """Bin decoded samples ``(gyro index, channel, t, value)`` of ``gyros`` at ``dt`` s."""
+
+    def __init__(self, gyros: Sequence[str], dt: float = 1.0, epoch: float | None = None,
+                 max_gap: float = 3600.0) -> None:
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, got {dt!r}")
+        self.gyros = tuple(gyros)
+        self.dt = float(dt)
+        self.t0: float | None = None if epoch is None else float(epoch)
+        self.max_gap_bins = max(1, int(max_gap / dt))
+        self._open: list[_Open | None] = [None] * len(self.gyros)
+        self._bins = self._gaps = self._late = self._jumps = 0
+
+    def _close(self, g: int, b: _Open) -> Bin:
+        d = b.s0 / b.n0 if b.n0 else math.nan
+        tm = b.s1 / b.n1 if b.n1 else math.nan
+        self._bins += 1
+        if not (b.n0 and b.n1):
+            self._gaps += 1
+        t0 = self.t0 if self.t0 is not None else 0.0  # set by the first add()
+        return Bin(self.gyros[g], t0 + b.k * self.dt, b.k, d, tm, b.n0, b.n1)
+
+    def add(self, g: int, channel: int, t: float, value: float, out: list[Bin]) -> None:
+        """Add one sample; bins it closes are appended to ``out`` in time order."""
+        if self.t0 is None:
+            self.t0 = math.floor(t / self.dt) * self.dt
+        k = math.floor((t - self.t0) / self.dt)
+        b = self._open[g]
+        if b is None:
+            b = self._open[g] = _Open(k)
+        elif k != b.k:
+            if k < b.k:
+                self._late += 1
+                return
+            if k - b.k > self.max_gap_bins:
+                self._jumps += 1
+                return
+            out.append(self._close(g, b))
+            for kk in range(b.k + 1, k):
+                out.append(self._close(g, _Open(kk)))
+            b = self._open[g] = _Open(k)
+        if channel == 0:
+            b.s0 += value
+            b.n0 += 1
+        else:
+            b.s1 += value
+            b.n1 += 1
+
+    def add_many(self, samples: Iterable[tuple[int, int, float, float]]) -> list[Bin]:
+        """Add samples (e.g. :meth:`DecodingListener.drain` output); return closed bins."""
+        out: list[Bin] = []
+        add = self.add
+        for g, c, t, v in samples:
+            add(g, c, t, v, out)
+        return out
+
+    def flush(self, until_t: float | None = None) -> list[Bin]:
+        """Close bins that end at or before ``until_t`` (s; gaps up to it for every gyro
+        that has started), or, with None, every open bin (end of run)."""
+        out: list[Bin] = []
+        if self.t0 is None:
+            return out
+        for g, b in enumerate(self._open):
+            if b is None:
+                continue
+            if until_t is None:
+                out.append(self._close(g, b))
+                self._open[g] = _Open(b.k + 1)
+                continue
+            k_end = math.floor((until_t - self.t0) / self.dt)  # bin containing until_t
+            if k_end <= b.k:
+                continue
+            k_end = min(k_end, b.k + self.max_gap_bins)
+            out.append(self._close(g, b))
+            for kk in range(b.k + 1, k_end):
+                out.append(self._close(g, _Open(kk)))
+            self._open[g] = _Open(k_end)
+        out.sort(key=lambda r: r.k)
+        return out
+
+    def stats(self) -> BinStats:
+        return BinStats(self._bins, self._gaps, self._late, self._jumps)
+
+
+class SamplesWriter:
+    """Write each gyro's bins to ``<run_dir>/<gyro>/samples.csv`` with columns
+    ``t, drift, temp, n_drift, n_temp`` (t = bin start, s; NaN written as ``nan``; floats
+    in Python's shortest round-trip form, so a file read back gives the same floats)."""
+
+    def __init__(self, run_dir: str | Path, gyros: Sequence[str]) -> None:
+        self.paths: dict[str, Path] = {}
+        self._files: dict[str, TextIO] = {}
+        self._writers = {}
+        for name in gyros:
+            path = Path(run_dir) / name / "samples.csv"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            f = path.open("w", newline="", encoding="utf-8")
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(SAMPLES_COLUMNS)
+            self.paths[name], self._files[name], self._writers[name] = path, f, w
+
+    def write(self, bins: Iterable[Bin]) -> None:
+        for b in bins:
+            self._writers[b.gyro].writerow(
+                (repr(b.t), repr(b.drift), repr(b.temp), b.n_drift, b.n_temp))
+
+    def flush(self) -> None:
+        for f in self._files.values():
+            f.flush()
+
+    def close(self) -> None:
+        for f in self._files.values():
+            f.close()
+
+    def __enter__(self) -> SamplesWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def read_samples_csv(path: str | Path) -> dict[str, list[float]]:
+    """Read a ``samples.csv`` back as columns of floats (counts as floats too)."""
+    with Path(path).open(newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    if tuple(header) != SAMPLES_COLUMNS:
+        raise DataError(f"{path}: unexpected columns {header}")
+    return {name: [float(r[i]) for r in body] for i, name in enumerate(header)}

@@ -1,0 +1,30 @@
+"""The glue of the receive path, shared by live runs and replay: the listener's sample FIFO
+drained into the binner. Live, the daemon calls :meth:`Ingest.pump` from its own thread
+(never from the Notifier's); in replay, :func:`gyrostand.can.replay.replay` calls it between
+frames. Same objects, same order of operations, so the same frames give the same bins.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gyrostand.can.binning import Bin, Binner
+from gyrostand.can.decode import DecodingListener
+
+__all__ = ["Ingest"]
+
+
+@dataclass
+class Ingest:
+    listener: DecodingListener
+    binner: Binner
+
+    def pump(self, max_items: int | None = None) -> list[Bin]:
+        """Move decoded samples into the binner; return the bins that closed."""
+        return self.binner.add_many(self.listener.drain(max_items))
+
+    def finish(self, until_t: float | None = None) -> list[Bin]:
+        """End of run (or a timeout at frame time ``until_t``): pump, then flush."""
+        bins = self.pump()
+        bins += self.binner.flush(until_t)
+        return bins
