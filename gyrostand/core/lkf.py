@@ -219,7 +219,7 @@ def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> t
 
 def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
         gamma0: float = PAPER_POINT, b0: float = 0.0, sigma: float | None = None,
-        held: Mapping[str, float] | None = None, iterate: bool = False, max_iter: int = 30,
+        held: Mapping[str, float] | None = None, iterate: bool = False, max_iter: int = 60,
         tol: float = 1e-4, prior_std: Mapping[str, float] | None = None) -> FitResult:
     """Run the LKF over the samples (single pass, or iterated with ``iterate=True``).
 
@@ -245,31 +245,30 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     ps = dict(prior_std) if prior_std else OnlineLKF.default_prior_std(
         model, samples.dt, float(y[first]), float(samples.temp[0]),
         float(np.nanstd(y)) + hv["markov.sigma"], float(np.std(samples.temp)))
-    point = {"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}
-    passes = []
-    for it in range(max_iter if iterate else 1):
+    keys = [k for k in ESTIMATED if k in layout]
+    state = {"passes": 0}
+
+    def one_pass(pt: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+        """g(point): the estimate (and its std) of one LKF pass linearised at ``pt``."""
+        point = dict(zip(keys, pt, strict=True))
         f = OnlineLKF(model, samples.dt, beta0=point["markov.beta"],
-                      gamma0=point["temp.gamma"], b0=point["bias.b"], held=hv, prior_std=ps)
+                      gamma0=point.get("temp.gamma", 0.0), b0=point.get("bias.b", 0.0),
+                      held=hv, prior_std=ps)
         run = _run(f, samples)
-        passes.append(dict(point))
-        est = run["final"]
-        new = {k: v[0] for k, v in est.items()}
-        if not iterate:
-            break
-        change = max(abs(new[k] - point[k]) / max(abs(new[k]), 1e-12) for k in new)
-        # safeguard: beta moves at most a factor 10 per pass and stays positive
-        b_old, b_new = point["markov.beta"], new["markov.beta"]
-        if b_new <= 0:
-            warnings.append(f"lkf: pass {it + 1} gave beta <= 0; re-linearised at beta0/3")
-            new["markov.beta"] = b_old / 3
-        else:
-            new["markov.beta"] = min(max(b_new, b_old / 10), b_old * 10)
-        point.update(new)
-        if change < tol:
-            break
-    else:
-        if iterate:
+        state["passes"] += 1
+        return (np.array([run["final"][k][0] for k in keys]),
+                np.array([run["final"][k][1] for k in keys]), run)
+
+    x0 = np.array([{"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}[k] for k in keys])
+    first_point = dict(zip(keys, map(float, x0), strict=True))
+    x1, sd, run = one_pass(x0)
+    settled = not iterate
+    if iterate:
+        x0, x1, sd, run, settled = _fixed_point(one_pass, lambda: state["passes"], x0, x1,
+                                                sd, run, max_iter, tol, warnings)
+        if not settled:
             warnings.append(f"lkf: iteration did not settle within {max_iter} passes")
+    point = dict(zip(keys, map(float, x0), strict=True))
     est = run["final"]
     if est["markov.beta"][0] <= 0:
         warnings.append(f"lkf: beta = {est['markov.beta'][0]:.3g} <= 0 (not mean-reverting)")
@@ -286,10 +285,55 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
         residual_var=run["f"], warnings=tuple(dict.fromkeys(warnings)),
         source=samples.source, n_samples=len(samples), n_observed=samples.n_observed,
         dt=samples.dt, covariance=run["P"][np.ix_(idx, idx)], cov_names=tuple(names),
-        info={"linearization": passes[-1] if iterate else passes[0], "passes": len(passes),
-              "iterated": iterate, "held_from": src, "first_point": passes[0]},
+        info={"linearization": point, "passes": state["passes"], "iterated": iterate,
+              "settled": settled, "held_from": src, "first_point": first_point},
         history=run["history"],
     )
+
+
+def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, warnings):
+    """Re-linearise until the estimate equals the linearisation point: x = g(x).
+
+    Plain re-linearisation converges linearly (slowly along the γ/β ridge); every step is
+    accelerated with SQUAREM (Varadhan & Roland 2008), falling back to the plain step when
+    the extrapolation would make β non-positive. Settled when every parameter moves by less
+    than ``tol`` (relative) or 1e-3 of its std. Returns the last point and its pass.
+    """
+
+    def fix_beta(x_new, x_old):
+        x_new = x_new.copy()
+        if x_new[0] <= 0:
+            warnings.append("lkf: a pass gave beta <= 0; re-linearised at beta0/3")
+            x_new[0] = x_old[0] / 3
+        x_new[0] = min(max(x_new[0], x_old[0] / 10), x_old[0] * 10)
+        return x_new
+
+    def small(a, b, s):
+        d = np.abs(a - b)
+        return bool(np.all((d <= tol * np.abs(b)) | (d <= 1e-3 * s)))
+
+    x1 = fix_beta(x1, x0)
+    while True:
+        if small(x1, x0, sd):
+            return x0, x1, sd, run, True
+        x2, sd2, run2 = g(x1)
+        x2 = fix_beta(x2, x1)
+        r, v = x1 - x0, x2 - 2 * x1 + x0
+        scale = np.where(sd2 > 0, sd2, 1.0)
+        nr, nv = np.linalg.norm(r / scale), np.linalg.norm(v / scale)
+        alpha = -nr / nv if nv > 0 else -1.0
+        alpha = min(alpha, -1.0)
+        xa = x0 - 2 * alpha * r + alpha * alpha * v
+        while xa[0] <= 0 and alpha < -1.0:
+            alpha = (alpha - 1.0) / 2
+            xa = x0 - 2 * alpha * r + alpha * alpha * v
+        if xa[0] <= 0:
+            xa = x2
+        x0 = xa
+        x1, sd, run = g(x0)
+        x1 = fix_beta(x1, x0)
+        if count() >= max_iter:
+            return x0, x1, sd, run, small(x1, x0, sd)
 
 
 def _run(f: OnlineLKF, samples: Samples) -> dict:
