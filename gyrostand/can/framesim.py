@@ -217,7 +217,8 @@ def send_frames(bus: can.BusABC, frames: Iterable[can.Message], realtime: bool =
 
 def write_log(path: str | Path, frames: Iterable[can.Message]) -> int:
     """Write frames to a log file; the suffix picks the python-can writer (.blf, .asc,
-    .log, .csv, ...). Returns the count."""
+    .log, .csv, ...). Frames with a non-finite timestamp cannot be stored and are skipped.
+    Returns the count written."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -227,8 +228,9 @@ def write_log(path: str | Path, frames: Iterable[can.Message]) -> int:
     n = 0
     try:
         for f in frames:
-            writer.on_message_received(f)
-            n += 1
+            if math.isfinite(f.timestamp):
+                writer.on_message_received(f)
+                n += 1
     finally:
         writer.stop()
     return n

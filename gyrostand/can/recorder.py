@@ -9,6 +9,10 @@ readable BLF up to the last flush. Other suffixes go to :class:`can.Logger` (``.
 The recorder flushes itself whenever frame time has advanced ``flush_interval`` seconds
 (1 s by default) since the last flush; call :meth:`Recorder.flush` from the daemon's 1-Hz
 tick as well, so a silent bus still gets its tail written.
+
+A frame whose timestamp is not finite cannot be stored by any log format (BLF's writer
+fails on it and would lose the file header): it is counted in ``unrecordable`` and skipped;
+the decoder rejects such frames anyway (``bad_timestamp``).
 """
 
 from __future__ import annotations
@@ -65,12 +69,16 @@ class Recorder(can.Listener):
         self.frames = 0
         self.flushes = 0
         self.errors = 0
+        self.unrecordable = 0
         self._stopped = False
 
     def on_message_received(self, msg: can.Message) -> None:
         try:
             with self._lock:
                 if self._stopped:
+                    return
+                if not math.isfinite(msg.timestamp):  # no log format can store it
+                    self.unrecordable += 1
                     return
                 self._writer.on_message_received(msg)
                 self.frames += 1

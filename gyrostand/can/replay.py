@@ -2,7 +2,8 @@
 
 :func:`read_log` opens anything :class:`can.LogReader` reads (``.blf``, ``.asc``, ``.csv``,
 candump ``.log``, ``.trc``, ``.mf4`` when asammdf is installed); ASC is read with absolute
-timestamps. :func:`replay` hands each frame to the very listeners a live run attaches to
+timestamps (note: python-can 4.6's ASC *writer* prints the start time's milliseconds
+unpadded, so ASC files it wrote can be off by up to 0.99 s in absolute time; BLF is exact). :func:`replay` hands each frame to the very listeners a live run attaches to
 its Notifier and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the
 bins the live run gave. All timing comes from frame timestamps; ``realtime=True`` only
 paces delivery (sleeping to frame time / ``speed``), it never changes the data.
