@@ -27,6 +27,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
@@ -289,8 +290,9 @@ class BadFrameInjector:
 
     def _make(self, kind: str, f: can.Message) -> can.Message | None:
         def copy(**kw) -> can.Message:
-            base = dict(timestamp=f.timestamp, arbitration_id=f.arbitration_id,
-                        is_extended_id=f.is_extended_id, data=bytes(f.data), is_rx=f.is_rx)
+            base: dict[str, Any] = dict(
+                timestamp=f.timestamp, arbitration_id=f.arbitration_id,
+                is_extended_id=f.is_extended_id, data=bytes(f.data), is_rx=f.is_rx)
             base.update(kw)
             return can.Message(**base)
 
@@ -311,7 +313,8 @@ class BadFrameInjector:
             return copy(timestamp=math.nan)
         if msg is None or key not in self._mapped:
             return None
-        raw = msg.decode(bytes(f.data), decode_choices=False, scaling=False)
+        raw: dict[str, Any] = dict(
+            msg.decode(bytes(f.data), decode_choices=False, scaling=False))  # type: ignore[arg-type]
         if kind == "bad_mux":
             mux = next((s for s in msg.signals if s.is_multiplexer), None)
             if mux is None:

@@ -51,9 +51,9 @@ def paced(messages: Iterable[can.Message], speed: float = 1.0,
     """Yield frames no faster than their timestamps say (``speed`` x real time)."""
     if not speed > 0:
         raise ValueError(f"speed must be > 0, got {speed!r}")
-    t_first = wall0 = None
-    for msg in messages:
-        if t_first is None:
+    t_first = wall0 = 0.0
+    for n, msg in enumerate(messages):
+        if n == 0:
             t_first, wall0 = msg.timestamp, clock()
         else:
             delay = wall0 + (msg.timestamp - t_first) / speed - clock()
