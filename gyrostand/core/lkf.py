@@ -28,7 +28,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import GyrostandError, ModelError
 from .data import Samples
 from .kalman import foh_weights, kf_step
 from .model import Model
@@ -140,11 +140,11 @@ class OnlineLKF:
 
     def _start(self, y: float, T: float) -> None:
         n = len(self.layout)
-        # the moving point starts at the first measurement (or, in a gap, in equilibrium)
-        self._eps0 = self.gamma0 * T / self.beta0 if math.isnan(y) else y - self.b0
+        # the moving point starts at the first measurement
+        self._eps0 = y - self.b0
         self._T = T
         ps = self.prior_std or self.default_prior_std(
-            self.model, self.dt, 0.0 if math.isnan(y) else y, T, self.held["markov.sigma"], 1.0)
+            self.model, self.dt, y, T, self.held["markov.sigma"], 1.0)
         sig = self.held["markov.sigma"]
         P = np.zeros((n, n))
         P[0, 0] = ps.get("delta_eps", math.sqrt(sig * sig + self.r)) ** 2
@@ -161,6 +161,8 @@ class OnlineLKF:
         Returns the innovation and its variance (NaN for a gap).
         """
         if self.k == 0:
+            if math.isnan(y):
+                return math.nan, math.nan  # the filter starts at the first measured sample
             self._start(y, T)
             A = self._no_predict
         else:
@@ -200,12 +202,15 @@ def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> t
     need = [n for n in held_names(model) if n not in given]
     if not need:
         return {n: float(given[n]) for n in held_names(model)}, "given"
+    r = None
     if model.is_single_process:
         from .lsq import lsq
 
-        r = lsq(samples, model)
-        src = "lsq"
-    else:
+        try:
+            r, src = lsq(samples, model), "lsq"
+        except GyrostandError as exc:
+            log.info("lkf: no lsq noise estimate (%s); using ml", exc)
+    if r is None:
         from .ml import ml
 
         r = ml(samples, model, fixed={k: v for k, v in given.items() if k in model.param_names},
