@@ -59,16 +59,19 @@ class _Problem:
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
         self.rates = [n for n in model.names_of_kind("rate") if n not in self.fixed]
         stds = [n for n in model.names_of_kind("std") if n not in self.fixed]
-        fixed_std = [n for n in model.names_of_kind("std") if n in self.fixed]
+        # a noise level fixed at 0 stays 0 under a common scale: it does not stop concentration
+        fixed_std = [n for n in model.names_of_kind("std")
+                     if n in self.fixed and self.fixed[n] != 0]
+        for n in model.names_of_kind("std"):
+            if n in self.fixed and self.fixed[n] < 0:
+                raise ModelError(f"fixed {n} must be >= 0, got {self.fixed[n]}")
         self.concentrate = not fixed_std and bool(stds)
+        self.ref: str | None = None
+        self.ref_scale = 1.0
         if self.concentrate:
             self.ref = "markov.sigma" if "markov.sigma" in stds else stds[0]
-            self.ref_scale = 1.0
-        else:
-            self.ref = None
-            self.ref_scale = float(self.fixed[fixed_std[0]]) if fixed_std else 1.0
-            if self.ref_scale <= 0:
-                raise ModelError(f"fixed {fixed_std[0]} must be > 0")
+        elif fixed_std:
+            self.ref_scale = float(self.fixed[fixed_std[0]])
         self.stds = [n for n in stds if n != self.ref]
         self.znames = self.rates + self.stds
         dur = max(samples.t[-1] - samples.t[0], 10 * samples.dt)
