@@ -206,3 +206,22 @@ def test_lkf_history_tracks_convergence(base_model, c1_samples):
             gamma0=-0.009)
     sd = r.history["markov.beta:std"]
     assert sd[10] > sd[-1] and r.history["markov.beta"].shape == (len(c1_samples),)
+
+
+def test_online_lsq_equals_batch_lsq():
+    from gyrostand.core.lsq import OnlineLSQ
+
+    m = Model.parse("markov,temp,bias")
+    p = truth("C1", sigma_v=0.02, **{"bias.b": 0.2})
+    s = simulate(m, p, paper_profile(), seed=45)
+    y = s.drift.copy()
+    y[[0, 300, 301, 900]] = np.nan
+    s = Samples.from_arrays(s.t, y, s.temp)
+    online = OnlineLSQ(m, 1.0)
+    for k in range(len(s)):
+        online.update(float(s.drift[k]), float(s.temp[k]))
+    est, _ = online.estimates()
+    batch = lsq(s, m)
+    for name in m.param_names:
+        assert est[name].value == pytest.approx(batch.value(name), rel=1e-9)
+        assert est[name].std == pytest.approx(batch.std(name), rel=1e-9)
