@@ -57,7 +57,9 @@ class _Problem:
         self.linear = model.names_of_kind("linear")
         self.lin_free = [n for n in self.linear if n not in self.fixed]
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
-        self.rates = [n for n in model.names_of_kind("rate") if n not in self.fixed]
+        # positive nonlinear parameters (rates 1/s and time constants s), searched in log
+        self.rates = [n for n, q in model.params
+                      if q.kind in ("rate", "time") and n not in self.fixed]
         stds = [n for n in model.names_of_kind("std") if n not in self.fixed]
         # a noise level fixed at 0 stays 0 under a common scale: it does not stop concentration
         fixed_std = [n for n in model.names_of_kind("std")
@@ -76,9 +78,14 @@ class _Problem:
         self.znames = self.rates + self.stds
         dur = max(samples.t[-1] - samples.t[0], 10 * samples.dt)
         self.duration = dur
-        lo = [np.log(1e-3 / dur)] * len(self.rates) + \
+        def rate_bounds(n: str) -> tuple[float, float]:
+            if model.kind(n) == "time":
+                return np.log(0.5 * samples.dt), np.log(10.0 * dur)
+            return np.log(1e-3 / dur), np.log(5.0 / samples.dt)
+
+        lo = [rate_bounds(n)[0] for n in self.rates] + \
              [np.log(RATIO_BOUNDS[0] * self.ref_scale)] * len(self.stds)
-        hi = [np.log(5.0 / samples.dt)] * len(self.rates) + \
+        hi = [rate_bounds(n)[1] for n in self.rates] + \
              [np.log(RATIO_BOUNDS[1] * self.ref_scale)] * len(self.stds)
         self.bounds = list(zip(lo, hi, strict=True))
         self.n_obs = samples.n_observed
@@ -153,6 +160,8 @@ def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
     for n in prob.rates:
         if n == "markov.beta" and beta0 is not None:
             vals = [beta0, beta0 * 3, beta0 / 3, beta0 / 10]
+        elif prob.model.kind(n) == "time":
+            vals = list(np.geomspace(10 * dt, dur / 3, 4))
         else:
             vals = list(np.geomspace(3.0 / dur, 0.3 / dt, 4))
         axes.append([np.log(v) for v in vals])
@@ -319,10 +328,10 @@ def ml(samples: Samples, model: Model, *, sigma: float | None = None,
         converged = bool(best.success) or _newton_gain(best, prob.n_obs) < 1e-4
         if not converged:
             warnings.append(f"ml: optimiser did not converge ({best.message})")
-        for name, v, (lo, hi) in zip(prob.znames, z, prob.bounds, strict=True):
-            if v <= lo + 1e-3 or v >= hi - 1e-3:
+        for name, v, (z_lo, z_hi) in zip(prob.znames, z, prob.bounds, strict=True):
+            if v <= z_lo + 1e-3 or v >= z_hi - 1e-3:
                 at_bound.append(name)
-                side = "lower" if v <= lo + 1e-3 else "upper"
+                side = "lower" if v <= z_lo + 1e-3 else "upper"
                 what = ("≈ 0: no measurable contribution" if side == "lower" and
                         model.kind(name) == "std" else "at the edge of its plausible range")
                 warnings.append(f"ml: {name} is at its {side} search bound ({what})")
@@ -388,7 +397,7 @@ def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], fr
         for n, v in zip(free, x, strict=True):
             q[n] = float(v)
         for n in free:
-            if model.kind(n) == "rate" and q[n] <= 0:
+            if model.kind(n) in ("rate", "time") and q[n] <= 0:
                 return -np.inf
         return model.loglik(q, samples)
 
@@ -416,7 +425,7 @@ def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], fr
         sd = np.sqrt(np.diag(cov))
         new_h = 0.1 * sd
         for i, n in enumerate(free):
-            if model.kind(n) == "rate":
+            if model.kind(n) in ("rate", "time"):
                 new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
             elif model.kind(n) == "std":
                 new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))

@@ -15,10 +15,11 @@ time.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
+from scipy.signal import savgol_filter
 
 from .kalman import first_order_response, foh_weights
 
@@ -29,14 +30,23 @@ P = Mapping[str, float]
 class Param:
     """One parameter of a term.
 
-    ``kind`` is ``"rate"`` (positive, enters nonlinearly: 1/s or s), ``"std"`` (a standard
-    deviation or noise intensity, >= 0) or ``"linear"`` (a coefficient the model is linear in).
+    ``kind`` is ``"rate"`` (positive, 1/s, enters nonlinearly), ``"time"`` (a positive time
+    constant, s, enters nonlinearly), ``"std"`` (a standard deviation or noise intensity,
+    >= 0) or ``"linear"`` (a coefficient the model is linear in).
     """
 
     name: str
     kind: str
     unit: str
     doc: str
+
+
+#: window of the temperature-rate estimate (s): a local quadratic fit (Savitzky-Golay)
+RATE_WINDOW_S = 61.0
+#: rate (degC/s) at which the hysteresis regressor tanh(dT/dt / r0) reaches 0.76
+HYSTERESIS_RATE = 1e-3
+#: reference temperature of temp2 (degC)
+T_REF = 25.0
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,7 @@ class Context:
     t: np.ndarray
     temp: np.ndarray
     dt: float
+    _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def through_markov(self, u: np.ndarray, beta: float) -> np.ndarray:
         """Response of dx/dt = -beta x + u(t) to the input ``u`` (linear between samples).
@@ -56,6 +67,35 @@ class Context:
         phi, a0, a1 = foh_weights(beta, self.dt)
         return first_order_response(np.ascontiguousarray(u, dtype=float), phi, a0, a1,
                                     float(u[0]) / beta)
+
+    def effective_temp(self, p: P) -> np.ndarray:
+        """The temperature that drives the drift: T, or T lagged by ``temp_lag.tau``.
+
+        dT_L/dt = (T − T_L)/τ, T_L(0) = T(0).
+        """
+        tau = p.get("temp_lag.tau")
+        if tau is None:
+            return self.temp
+        return self.through_markov(self.temp / tau, 1.0 / tau)
+
+    @property
+    def temp_rate(self) -> np.ndarray:
+        """dT/dt (degC/s), robust to sensor noise and quantisation.
+
+        A naive difference of 0.05-degC steps is mostly quantisation noise; a local
+        quadratic least-squares fit over ``RATE_WINDOW_S`` (Savitzky-Golay derivative)
+        is exact on ramps and averages the steps out (noise std ≈ q/√12 · √(12/W³)).
+        """
+        if "rate" not in self._cache:
+            n = self.temp.size
+            w = int(round(RATE_WINDOW_S / self.dt)) | 1
+            w = min(w, n if n % 2 else n - 1)
+            if w < 5:
+                rate = np.gradient(self.temp, self.dt) if n > 1 else np.zeros(n)
+            else:
+                rate = savgol_filter(self.temp, w, 2, deriv=1, delta=self.dt, mode="interp")
+            self._cache["rate"] = rate
+        return self._cache["rate"]
 
 
 class Term:
@@ -132,7 +172,7 @@ class Temp(Term):
     math = "γ·T(t) into dε/dt"
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        return {self.key("gamma"): ctx.through_markov(ctx.temp, p["markov.beta"])}
+        return {self.key("gamma"): ctx.through_markov(ctx.effective_temp(p), p["markov.beta"])}
 
 
 class Bias(Term):
@@ -171,12 +211,90 @@ class RandomWalk(Term):
         return [(1.0, q * q * dt, 0.0)]
 
 
-#: the vocabulary of PRODUCT.md, in its order (the contract); None = not implemented yet
+class Temp2(Term):
+    """Quadratic temperature input of the drift: + γ₂ (T − T_ref)² in dε/dt, T_ref = 25 °C."""
+
+    name = "temp2"
+    params = (Param("gamma2", "linear", "y/(s*degC^2)", "quadratic temperature coefficient"),)
+    requires = ("markov",)
+    math = "γ₂·(T − T_ref)² into dε/dt"
+
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        u = (ctx.effective_temp(p) - T_REF) ** 2
+        return {self.key("gamma2"): ctx.through_markov(u, p["markov.beta"])}
+
+
+class TempLag(Term):
+    """The drift is driven by a lagged temperature T_L (dT_L/dt = (T − T_L)/τ) instead of T.
+
+    Models a sensor that is not where the heat acts: the gyro's sensitive element lags
+    the built-in sensor by τ seconds.
+    """
+
+    name = "temp_lag"
+    params = (Param("tau", "time", "s", "thermal lag between sensor and gyro"),)
+    requires = ("temp",)
+    math = "T → T_L,  dT_L/dt = (T − T_L)/τ"
+
+
+class TempRate(Term):
+    """Thermal-gradient effect at the output: + k · dT/dt."""
+
+    name = "temp_rate"
+    params = (Param("k", "linear", "y*s/degC", "sensitivity to the temperature rate"),)
+    math = "+ k·dT/dt"
+
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        return {self.key("k"): ctx.temp_rate}
+
+
+class Hysteresis(Term):
+    """Different offsets when heating and cooling: + h · tanh((dT/dt) / r₀).
+
+    A smooth sign with r₀ = 1e-3 degC/s (0.06 degC/min): +h while heating, −h while
+    cooling, ≈ 0 at a soak.
+    """
+
+    name = "hysteresis"
+    params = (Param("h", "linear", "y", "half the heating/cooling offset difference"),)
+    math = "+ h·sign(dT/dt)"
+
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        return {self.key("h"): np.tanh(ctx.temp_rate / HYSTERESIS_RATE)}
+
+
+class Trend(Term):
+    """Linear drift in time (ageing, settling): + c · (t − t₀)."""
+
+    name = "trend"
+    params = (Param("c", "linear", "y/s", "drift rate of the offset"),)
+    math = "+ c·(t − t₀)"
+
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        return {self.key("c"): ctx.t - ctx.t[0]}
+
+
+class Warmup(Term):
+    """Switch-on transient: + A · exp(−(t − t₀)/τ_w)."""
+
+    name = "warmup"
+    params = (
+        Param("A", "linear", "y", "amplitude of the switch-on transient"),
+        Param("tau", "time", "s", "time constant of the switch-on transient"),
+    )
+    math = "+ A·exp(−(t − t₀)/τ_w)"
+
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        return {self.key("A"): np.exp(-(ctx.t - ctx.t[0]) / p[self.key("tau")])}
+
+
+#: the vocabulary of PRODUCT.md, in its order (the contract)
 VOCABULARY: tuple[str, ...] = (
     "markov", "temp", "white", "bias", "temp2", "temp_lag", "temp_rate", "hysteresis",
     "trend", "warmup", "random_walk", "markov2",
 )
 
 TERMS: dict[str, type[Term]] = {
-    cls.name: cls for cls in (Markov, Temp, White, Bias, RandomWalk, Markov2)
+    cls.name: cls for cls in (Markov, Temp, White, Bias, Temp2, TempLag, TempRate, Hysteresis,
+                              Trend, Warmup, RandomWalk, Markov2)
 }
