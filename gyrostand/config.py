@@ -46,6 +46,7 @@ __all__ = [
     "IDENTIFIERS",
     "ChannelConfig",
     "ResultConfig",
+    "LkfConfig",
     "GyroConfig",
     "SamplingConfig",
     "ResponsesConfig",
@@ -95,6 +96,34 @@ class ResultConfig:
 
 
 @dataclass(frozen=True)
+class LkfConfig:
+    """Online LKF of one gyro: linearisation point and held noise levels.
+
+    ``beta0`` (1/s), ``gamma0`` (drift unit per s·degC), ``b0`` (drift unit) are the
+    linearisation point; ``sigma`` (``markov.sigma``) and ``white_sigma`` (``white.sigma``)
+    the held noise levels (drift unit); ``held`` any further held parameter by name (e.g.
+    ``random_walk.q``). A value left out (None) is *estimated from a warm-up*: the first
+    ``warmup`` bins (s of data at Δt = 1 s) are fitted by least squares (point) and the
+    core's held-value estimate (noise levels), then the filter starts and replays those
+    bins. The paper's fixed point 1e-4 is not used: it biases the estimates badly.
+    ``iterate`` re-linearises the *final* batch LKF until it settles.
+    """
+
+    beta0: float | None = None
+    gamma0: float | None = None
+    b0: float | None = None
+    sigma: float | None = None
+    white_sigma: float | None = None
+    held: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    warmup: int = 300
+    iterate: bool = False
+
+    @property
+    def needs_warmup(self) -> bool:
+        return None in (self.beta0, self.gamma0, self.b0, self.sigma, self.white_sigma)
+
+
+@dataclass(frozen=True)
 class GyroConfig:
     name: str
     drift: ChannelConfig
@@ -102,6 +131,7 @@ class GyroConfig:
     model: tuple[str, ...]
     identifiers: tuple[str, ...]
     result: ResultConfig | None = None
+    lkf: LkfConfig = field(default_factory=LkfConfig)
 
 
 @dataclass(frozen=True)
@@ -362,7 +392,7 @@ class _Parser:
 
     def gyro(self, value: Any, path: str) -> GyroConfig:
         m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
-                         ("identifiers", "result"))
+                         ("identifiers", "result", "lkf"))
         name = self.string(m["name"], f"{path}.name")
         if not _NAME_RE.match(name):
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
@@ -381,7 +411,33 @@ class _Parser:
                 summary = self.message(r["summary"], f"{path}.result.summary")
                 self.require_signals(summary, f"{path}.result.summary", SUMMARY_SIGNALS)
             result = ResultConfig(values, summary)
-        return GyroConfig(name, drift, temp, model, idents, result)
+        lkf = self.lkf(m.get("lkf") or {}, f"{path}.lkf", model)
+        return GyroConfig(name, drift, temp, model, idents, result, lkf)
+
+    def lkf(self, value: Any, path: str, model: tuple[str, ...]) -> LkfConfig:
+        keys = ("beta0", "gamma0", "b0", "sigma", "white_sigma")
+        m = self.mapping(value, path, (), keys + ("held", "warmup", "iterate"))
+        vals: dict[str, float | None] = {}
+        for k in keys:
+            v = m.get(k)
+            if v is None or v == "auto":
+                vals[k] = None
+                continue
+            lo, lo_open = {"beta0": (0.0, True), "sigma": (0.0, False),
+                           "white_sigma": (0.0, False)}.get(k, (None, False))
+            vals[k] = self.number(v, f"{path}.{k}", lo=lo, lo_open=lo_open)
+        held_raw = self.mapping(m.get("held") or {}, f"{path}.held", (),
+                                tuple((m.get("held") or {}).keys()))
+        held: dict[str, float] = {}
+        for k, v in held_raw.items():
+            mt = _PARAM_RE.match(str(k))
+            if not mt or mt.group(1) not in model:
+                raise self.fail(f"{path}.held.{k}", "expected '<term>.<param>' of a term in "
+                                                    "this gyro's model")
+            held[str(k)] = self.number(v, f"{path}.held.{k}", lo=0.0)
+        warmup = self.integer(m.get("warmup", 300), f"{path}.warmup", 10, 10_000_000)
+        iterate = bool(self.boolean(m.get("iterate", False), f"{path}.iterate"))
+        return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate, **vals)
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         owner: dict[tuple[int, str], str] = {}

@@ -285,5 +285,10 @@ class DecodingListener(can.Listener):
                            listener_errors=lerr, rejected=rej)
 
     @property
+    def last_timestamp(self) -> float:
+        """Timestamp (s) of the newest accepted frame (frame time); -inf before the first."""
+        return self._last_t
+
+    @property
     def gyro_names(self) -> Sequence[str]:
         return self.channels.gyros
