@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import demo, identify
+from . import demo, identify, replay, run, simulate
 
-SUBCOMMANDS = (identify, demo)
+SUBCOMMANDS = (run, replay, simulate, demo, identify)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,6 +33,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level
+        h.setLevel(level)
     try:
         return int(args.func(args) or 0)
     except GyrostandError as exc:

@@ -1,0 +1,34 @@
+"""``gyrostand replay CONFIG LOG [--out DIR] [--realtime] [--speed X]``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from ..config import load_config
+from ..session.offline import run_replay
+from .common import print_outcome
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "replay", help="run a recorded CAN log through the daemon's pipeline",
+        description="Replay a log (BLF, ASC, candump .log, CSV, MF4 where python-can reads "
+                    "it) through the same pipeline as a live run; all timing from frame "
+                    "timestamps; as fast as possible unless --realtime.")
+    p.add_argument("config", help="YAML session file")
+    p.add_argument("log", help="recorded CAN log, e.g. a run's raw.blf")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="parent folder of the run folder (default: session.output)")
+    p.add_argument("--realtime", action="store_true", help="pace frames to their timestamps")
+    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: x real time")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config)
+    outcome = run_replay(cfg, args.log, out=args.out, realtime=args.realtime,
+                         speed=args.speed)
+    print_outcome(outcome, sys.stdout)
+    return 0

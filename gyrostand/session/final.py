@@ -1,0 +1,199 @@
+"""The end of a run: batch fits of every gyro's 1-s series, ``result.json`` and the report.
+
+Each gyro is fitted with its configured identifiers plus ``ml`` (always), on the bins of
+the whole run (time relative to the gyro's first bin, s). ``lkf`` uses the session's
+linearisation point (values the config leaves out come from a fit of the whole record, as
+the online warm-up does on its first bins; so the final fit depends on the samples only) and re-linearises only with ``lkf.iterate: true``. A method that
+fails is recorded with its error; it never stops the others.
+
+``result.json``::
+
+    {"session": ..., "source": "live" | "replay of <log>", "run_dir": ..., "dt": 1.0,
+     "gyros": {"<gyro>": {"model": [...], "t0": <first bin start, s>,
+                          "bins": n, "gaps": n, "observed": n,
+                          "fits": {"lkf": FitResult.to_dict(), "ml": {...},
+                                   "lsq": {"error": "..."}},
+                          "online": {"lkf": {"status": ..., "parameters": {...}}}}},
+     "stats": {decoder, binner, recorder, responses, commands, timing}}
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import GyroConfig, SessionConfig
+from ..core.data import Samples
+from ..core.identify import identify
+from ..core.model import Model
+from ..core.results import UNIT_TEXT, FitResult
+from ..errors import GyrostandError
+from .online import LkfPoint, OnlineEstimate, resolve_lkf_point
+
+__all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods"]
+
+log = logging.getLogger(__name__)
+
+
+def final_methods(gyro: GyroConfig) -> tuple[str, ...]:
+    """The configured identifiers, then ``ml`` if not among them."""
+    return tuple(dict.fromkeys((*gyro.identifiers, "ml")))
+
+
+@dataclass
+class GyroFinal:
+    """Final fits of one gyro: ``fits[method]`` a :class:`FitResult` or an error string."""
+
+    gyro: str
+    model: Model
+    t0: float
+    bins: int
+    gaps: int
+    observed: int
+    fits: dict[str, FitResult | str] = field(default_factory=dict)
+    online: list[OnlineEstimate] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        fits = {m: (f.to_dict() if isinstance(f, FitResult) else {"error": f})
+                for m, f in self.fits.items()}
+        online = {e.identifier: {
+            "status": e.status, "samples": e.samples, "residual_rms": _finite(e.residual_rms),
+            "note": e.note,
+            "parameters": {k: {"value": _finite(v), "std": _finite(s)}
+                           for k, (v, s) in e.values.items()}} for e in self.online}
+        return {"model": list(self.model.names), "t0": _finite(self.t0), "bins": self.bins,
+                "gaps": self.gaps, "observed": self.observed, "fits": fits, "online": online}
+
+
+def samples_of(cols: Mapping[str, Sequence[float]], dt: float,
+               source: str) -> tuple[Samples, float]:
+    """A gyro's ``samples.csv`` columns as :class:`Samples` with time from its first bin
+    (s); returns the first bin's start time ``t0`` (s) too."""
+    t = np.asarray(cols["t"], dtype=float)
+    t0 = float(t[0])
+    rel = np.round((t - t0) / dt) * dt
+    s = Samples.from_arrays(rel, np.asarray(cols["drift"], dtype=float),
+                            np.asarray(cols["temp"], dtype=float), dt=dt, source=source)
+    return s, t0
+
+
+def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, source: str,
+             lkf_point: LkfPoint | None = None,
+             online: Sequence[OnlineEstimate] = ()) -> GyroFinal:
+    """Run every final method on one gyro's bins, given as the columns of its
+    ``samples.csv`` (errors recorded, never raised)."""
+    model = Model.parse(gyro.model)
+    n = len(cols["t"])
+    gaps = sum(1 for a, b in zip(cols["n_drift"], cols["n_temp"], strict=True)
+               if a == 0 or b == 0)
+    out = GyroFinal(gyro.name, model, math.nan, n, gaps, 0, online=list(online))
+    if not n:
+        for m in final_methods(gyro):
+            out.fits[m] = "no bins were recorded for this gyro"
+        return out
+    try:
+        samples, out.t0 = samples_of(cols, dt, source)
+    except GyrostandError as exc:
+        for m in final_methods(gyro):
+            out.fits[m] = str(exc)
+        return out
+    out.observed = samples.n_observed
+    for method in final_methods(gyro):
+        try:
+            opts: dict[str, Any] = {}
+            if method == "lkf":
+                pt = lkf_point or resolve_lkf_point(model, gyro.lkf, samples)
+                opts = {"beta0": pt.beta0, "gamma0": pt.gamma0, "b0": pt.b0,
+                        "held": dict(pt.held), "iterate": gyro.lkf.iterate}
+            out.fits[method] = identify(samples, model, method, **opts)
+        except (GyrostandError, ValueError, np.linalg.LinAlgError) as exc:
+            log.warning("gyro %s: final %s fit failed: %s", gyro.name, method, exc)
+            out.fits[method] = str(exc)
+    return out
+
+
+def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
+                      finals: Sequence[GyroFinal], stats: Mapping[str, Any]) -> None:
+    doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
+           "run_dir": str(run_dir), "dt": cfg.sampling.dt,
+           "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
+    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
+    """One gyro's parameters: a column per method (value ± std), truth first if known."""
+    methods = list(final.fits)
+    head = f"{'parameter':<14}" + (f" {'truth':>12}" if truth else "")
+    head += "".join(f" {m:>24}" for m in methods) + "  unit"
+    lines = [head]
+    for name in final.model.param_names:
+        row = f"{name:<14}"
+        if truth:
+            row += f" {truth[name]:>12.5g}" if name in truth else f" {'':>12}"
+        unit = ""
+        for m in methods:
+            f = final.fits[m]
+            if isinstance(f, FitResult) and name in f.parameters:
+                e = f.parameters[name]
+                unit = UNIT_TEXT.get(e.unit, e.unit)
+                cell = f"{e.value:.5g} (held)" if e.fixed else f"{e.value:.5g} ± {e.std:.2g}"
+            else:
+                cell = "—"
+            row += f" {cell:>24}"
+        lines.append(f"{row}  {unit}")
+    rms = f"{'residual RMS':<14}" + (f" {'':>12}" if truth else "")
+    for m in methods:
+        f = final.fits[m]
+        rms += f" {f.residual_rms:>24.4g}" if isinstance(f, FitResult) else f" {'—':>24}"
+    lines.append(rms)
+    for m in methods:
+        f = final.fits[m]
+        if isinstance(f, str):
+            lines.append(f"{m}: failed: {f}")
+        else:
+            lines += [f"{m}: warning: {w}" for w in f.warnings]
+    return "\n".join(lines)
+
+
+def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[GyroFinal],
+                 stats: Mapping[str, Any], truths: Mapping[str, Mapping[str, float]]) -> None:
+    """``report.txt``: the final table per gyro and the counts of the run."""
+    dec = stats.get("decoder", {})
+    lines = [f"gyrostand run report: session {cfg.name} ({source})", "",
+             f"frames received {dec.get('received', 0)}, decoded {dec.get('decoded', 0)}, "
+             f"ignored {dec.get('ignored', 0)}, rejected {dec.get('rejected_total', 0)}, "
+             f"bus errors {dec.get('bus_errors', 0)}, counter jumps "
+             f"{dec.get('counter_jumps', 0)}"]
+    rej = {k: v for k, v in dec.get("rejected", {}).items() if v}
+    if rej:
+        lines.append("rejected by reason: " + ", ".join(f"{k} {v}" for k, v in rej.items()))
+    b = stats.get("binner", {})
+    lines.append(f"bins {b.get('bins', 0)} (gaps {b.get('gaps', 0)}), late samples "
+                 f"{b.get('late', 0)}, refused jumps {b.get('jumps', 0)}")
+    for f in finals:
+        lines += ["", f"gyro {f.gyro}: model {','.join(f.model.names)}; {f.bins} bins, "
+                      f"{f.gaps} gaps, {f.observed} observed", ""]
+        lines.append(result_table(f, truths.get(f.gyro)))
+    lines += ["", "(y = the drift's unit, e.g. deg/h; ± one standard deviation)"]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _clean(x: Any) -> Any:
+    if isinstance(x, float):
+        return _finite(x)
+    if isinstance(x, Mapping):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    return x

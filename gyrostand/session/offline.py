@@ -1,0 +1,92 @@
+"""Replay of a recorded log, and the stand simulator's truth, for the CLI and the demo.
+
+Replay feeds every frame of the log to the same :class:`~gyrostand.session.pipeline.Pipeline`
+a live run uses (via :func:`gyrostand.can.replay.replay`, which calls the listener exactly
+as the Notifier does), so the same frames give the same ``samples.csv`` and the same final
+fits. Response frames are built and counted but go nowhere. A ``stop`` command in the log is
+handled like live (acked into the void) but reading goes on to the end of the log: a live
+run stops recording right after its stop, so the rest of the log is what the live run
+binned too.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+import numpy as np
+
+from ..can.decode import ChannelMap
+from ..can.framesim import FrameSimOptions, Truth, generate_frames
+from ..can.replay import replay
+from ..config import SessionConfig
+from ..core.model import Model
+from ..core.profiles import TemperatureProfile
+from ..core.simulate import simulate
+from ..errors import ConfigError
+from .outputs import RunLog, make_run_dir
+from .pipeline import NullSink, Pipeline, RunOutcome
+
+__all__ = ["run_replay", "simulated_truths", "simulated_frames", "truth_params"]
+
+log = logging.getLogger(__name__)
+
+
+def run_replay(cfg: SessionConfig, log_path: str | Path, *, out: str | Path | None = None,
+               realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
+               truths: dict[str, dict[str, float]] | None = None) -> RunOutcome:
+    """Replay ``log_path`` (any format python-can reads) through the pipeline, as fast as
+    possible unless ``realtime`` (paced to frame time / ``speed``)."""
+    run_dir = make_run_dir(out or cfg.output, cfg.name)
+    runlog = RunLog(run_dir)
+    try:
+        pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {log_path}")
+        log.info("replaying %s into %s", log_path, run_dir)
+        for bins in replay(log_path, pipe.ingest, realtime=realtime, speed=speed,
+                           pump_every=pump_every):
+            pipe.step(bins)
+        pipe.step([])
+        return pipe.finish("end of log", truths=truths)
+    finally:
+        runlog.close()
+
+
+def truth_params(cfg: SessionConfig) -> dict[str, dict[str, float]]:
+    """The simulator's true parameters per gyro (``white.sigma`` 0 unless given)."""
+    if cfg.simulate is None:
+        return {}
+    out = {}
+    for name, g in cfg.simulate.gyros.items():
+        p = {"white.sigma": 0.0}
+        p.update(g.params)
+        out[name] = p
+    return out
+
+
+def simulated_truths(cfg: SessionConfig) -> list[Truth]:
+    """1-s truth of every configured gyro from the core simulator: the ``simulate``
+    section's model terms and parameters on its temperature profile, seeded (gyro i uses
+    the stream ``[seed, i]``); ``duration`` defaults to the profile's last breakpoint."""
+    sim = cfg.simulate
+    if sim is None:
+        raise ConfigError(f"{cfg.path}: simulate: missing (the simulator needs this section)")
+    profile = TemperatureProfile.from_breakpoints(sim.temperature)
+    params = truth_params(cfg)
+    truths = []
+    for i, g in enumerate(cfg.gyros):
+        if g.name not in sim.gyros:
+            raise ConfigError(f"{cfg.path}: simulate.gyros: no truth for gyro {g.name!r}")
+        model = Model.parse(sim.gyros[g.name].model)
+        s = simulate(model, params[g.name], profile, dt=cfg.sampling.dt,
+                     duration=sim.duration, seed=np.random.default_rng([sim.seed, i]))
+        truths.append(Truth(s.t, s.drift, s.temp))
+    return truths
+
+
+def simulated_frames(cfg: SessionConfig) -> Iterator[can.Message]:
+    """The simulated stand's frames (time-ordered), per the config's ``simulate`` section."""
+    truths = simulated_truths(cfg)  # raises ConfigError without a simulate section
+    return generate_frames(cfg.db, ChannelMap.from_config(cfg), truths,
+                           FrameSimOptions.from_config(cfg.simulate))

@@ -1,0 +1,373 @@
+"""The daemon's core, shared by live runs and replay: it does not know where frames come from.
+
+A driver (:mod:`~gyrostand.session.live` with a :class:`can.Notifier`, or
+:mod:`~gyrostand.session.offline` with a log file) feeds frames to :attr:`Pipeline.listener`
+and calls :meth:`Pipeline.step` with the bins that closed. Per step, in this order:
+
+1. every closed bin goes to ``<gyro>/samples.csv``, updates the gyro's online identifiers
+   (unless the run is ``idle``) and appends a row to ``<gyro>/estimates.csv``;
+2. when frame time crosses a multiple of ``responses.period`` (s) at a bin close, a result
+   round is sent: per gyro and online identifier, the ``GS_RESULT`` value/std frames of
+   every model parameter and a ``GS_SUMMARY`` frame;
+3. commands received since the last step are handled and acknowledged;
+4. when frame time crosses a multiple of ``responses.heartbeat`` (s), the 3-page
+   ``GS_STATUS`` heartbeat is sent.
+
+All timing is frame time (the newest accepted frame's timestamp, s). Only
+:meth:`Pipeline.wall_tick` reads the wall clock: live drivers call it so the heartbeat
+continues (with wall-clock timestamps) while the bus is silent. Sent frames carry the frame
+time as timestamp (a ``virtual`` bus with ``preserve_timestamps`` keeps it).
+
+Commands (``GS_COMMAND``, only from the configured message; ``Target`` must be this node or
+255, other targets are ignored): ``start`` (idle → running, else nack ``wrong_state``),
+``stop`` (ends the run: the driver stops reading), ``reset`` (online identifiers restart
+at the next bin; bins and files are kept), ``snapshot`` (flush files, write
+``snapshot.json`` with the current online estimates and send a result round now). Unknown
+codes are nacked ``unknown_command``, frames without Command/Sequence ``malformed``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import can
+
+from ..can.binning import Bin, Binner, SamplesWriter, read_samples_csv
+from ..can.bus import COMMANDS, FrameEncoder
+from ..can.decode import ChannelMap, DecodingListener
+from ..can.ingest import Ingest
+from ..config import SessionConfig
+from ..errors import GyrostandError
+from .final import GyroFinal, fit_gyro, write_report, write_result_json
+from .online import GyroTracker, OnlineEstimate
+from .outputs import EstimatesWriter
+
+__all__ = ["Pipeline", "FrameSink", "NullSink", "BusSink", "RunOutcome"]
+
+log = logging.getLogger(__name__)
+
+
+class FrameSink(Protocol):
+    """Where the daemon's frames go."""
+
+    def send(self, frames: Sequence[can.Message]) -> None: ...
+
+
+@dataclass
+class NullSink:
+    """Replay: frames are built (same code path) and counted, not sent."""
+
+    sent: int = 0
+    errors: int = 0
+
+    def send(self, frames: Sequence[can.Message]) -> None:
+        self.sent += len(frames)
+
+
+@dataclass
+class BusSink:
+    """Send on a bus; a failed send is counted and logged, never raised (a full transmit
+    queue must not stop the daemon)."""
+
+    bus: can.BusABC
+    timeout: float = 0.05
+    sent: int = 0
+    errors: int = 0
+    log_every: int = 100
+
+    def send(self, frames: Sequence[can.Message]) -> None:
+        for f in frames:
+            try:
+                self.bus.send(f, timeout=self.timeout)
+                self.sent += 1
+            except Exception as exc:  # CanError, BrokenPipeError of a remote bus, ...
+                self.errors += 1
+                if self.errors % self.log_every == 1:
+                    log.warning("cannot send frame 0x%X (%d send errors so far): %s",
+                                f.arbitration_id, self.errors, exc)
+
+
+@dataclass
+class RunOutcome:
+    """What a finished run produced: paths, final fits, why it stopped, the state."""
+
+    run_dir: Path
+    result_json: Path
+    report: Path
+    finals: list[GyroFinal]
+    stop_reason: str
+    state: str
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.state != "fault"
+
+
+def _quantile(xs: list[float], q: float) -> float:
+    if not xs:
+        return math.nan
+    s = sorted(xs)
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+class Pipeline:
+    """Bins → online identification → files and response frames, for one run.
+
+    Args:
+        cfg: the session.
+        run_dir: the run folder (see :mod:`~gyrostand.session.outputs`).
+        sink: where response frames go.
+        source: ``"live"`` or ``"replay of <log>"`` (written into result.json).
+        start_idle: begin ``idle`` (binning, no identification) until a ``start`` command.
+        wall: the wall clock (s), used only by :meth:`wall_tick` and for timing figures.
+    """
+
+    def __init__(self, cfg: SessionConfig, run_dir: Path, sink: FrameSink, *,
+                 source: str = "live", start_idle: bool = False,
+                 wall: Callable[[], float] = time.time) -> None:
+        self.cfg, self.run_dir, self.sink, self.source, self.wall = cfg, run_dir, sink, \
+            source, wall
+        self.channels = ChannelMap.from_config(cfg)
+        self.listener = DecodingListener(cfg.db, self.channels, capacity=cfg.sampling.buffer,
+                                         command=cfg.responses.command,
+                                         max_gap=cfg.sampling.max_gap)
+        self.binner = Binner(self.channels.gyros, cfg.sampling.dt, cfg.sampling.epoch,
+                             cfg.sampling.max_gap)
+        self.ingest = Ingest(self.listener, self.binner)
+        self.encoder = FrameEncoder(cfg.db)
+        self.trackers = {g.name: GyroTracker(g, cfg.sampling.dt) for g in cfg.gyros}
+        self.samples = SamplesWriter(run_dir, self.channels.gyros)
+        self.estimates = {
+            g.name: EstimatesWriter(run_dir / g.name / "estimates.csv",
+                                    self.trackers[g.name].identifiers,
+                                    self.trackers[g.name].model.param_names)
+            for g in cfg.gyros}
+        self.state = "idle" if start_idle else "running"
+        self.stop_requested: str | None = None
+        r = cfg.responses
+        self._next_result = -math.inf
+        self._next_beat = -math.inf
+        self._beat_frame_t = -math.inf
+        self._last_beat_wall = wall()
+        self._beats = 0
+        self._rounds = 0
+        self._last_end = -math.inf
+        self.commands: dict[str, int] = {"received": 0, "acked": 0, "nacked": 0,
+                                         "ignored": 0}
+        self.step_ms: list[float] = []
+        self._period, self._beat = r.period, r.heartbeat
+
+    # -- per step ----------------------------------------------------------------------
+    def step(self, bins: Sequence[Bin]) -> None:
+        """Process closed bins, send due frames, handle commands (see module doc)."""
+        if bins:
+            t_start = time.perf_counter()
+            self._bins(bins)
+            end = max(b.t for b in bins) + self.cfg.sampling.dt
+            self._last_end = max(self._last_end, end)
+            if end >= self._next_result:
+                self._next_result = (math.floor(end / self._period) + 1) * self._period
+                self.send_results()
+            self.step_ms.append((time.perf_counter() - t_start) * 1e3)
+        self._commands()
+        t = self.listener.last_timestamp
+        if t >= self._next_beat and math.isfinite(t):
+            self._next_beat = (math.floor(t / self._beat) + 1) * self._beat
+            self.heartbeat(t)
+
+    def _bins(self, bins: Sequence[Bin]) -> None:
+        self.samples.write(bins)
+        running = self.state in ("running", "stopping")
+        for b in bins:
+            tr = self.trackers[b.gyro]
+            if running:
+                tr.update(b.drift, b.temp)
+            self.estimates[b.gyro].write(b.t, tr.estimates())
+
+    def wall_tick(self) -> None:
+        """Live only: keep the 1-Hz heartbeat going (wall-clock timestamps) while no new
+        frame has arrived since the last beat; flush the files."""
+        now = self.wall()
+        t = self.listener.last_timestamp
+        if now - self._last_beat_wall >= self._beat and t <= self._beat_frame_t:
+            self.heartbeat(now)
+        self.samples.flush()
+        for w in self.estimates.values():
+            w.flush()
+
+    # -- frames out --------------------------------------------------------------------
+    def frame_time(self) -> float:
+        t = self.listener.last_timestamp
+        return t if math.isfinite(t) else 0.0
+
+    def heartbeat(self, timestamp: float) -> None:
+        ref = self.cfg.responses.status
+        self._beats += 1
+        self._last_beat_wall = self.wall()
+        self._beat_frame_t = self.listener.last_timestamp
+        if ref is None:
+            return
+        d, b = self.listener.stats(), self.binner.stats()
+        self.sink.send(self.encoder.status_frames(
+            ref, self.state, self._beats - 1, bins=b.bins, gaps=b.gaps, decoded=d.decoded,
+            rejected=d.rejected_total, bus_errors=d.bus_errors, late=b.late,
+            timestamp=timestamp))
+
+    def send_results(self, extra: dict[str, list[OnlineEstimate]] | None = None) -> None:
+        """One result round: every gyro's online estimates (plus ``extra`` per gyro, e.g.
+        the final ML) as GS_RESULT value/std frames and a GS_SUMMARY per identifier."""
+        ts = self.frame_time()
+        frames: list[can.Message] = []
+        for g in self.cfg.gyros:
+            if g.result is None:
+                continue
+            tr = self.trackers[g.name]
+            ests = list(tr.estimates()) + list((extra or {}).get(g.name, ()))
+            names = tr.model.param_names
+            for e in ests:
+                vals = [e.values[n][0] for n in names]
+                stds = [e.values[n][1] for n in names]
+                frames += self.encoder.result_frames(g.result.values, e.identifier, vals,
+                                                     stds, self._rounds, timestamp=ts)
+                if g.result.summary is not None:
+                    frames.append(self.encoder.summary_frame(
+                        g.result.summary, e.identifier, e.status, tr.model.names, e.samples,
+                        e.residual_rms, timestamp=ts))
+        self._rounds += 1
+        if frames:
+            self.sink.send(frames)
+
+    # -- commands ----------------------------------------------------------------------
+    def _commands(self) -> None:
+        for t, values in self.listener.pop_commands():
+            self.commands["received"] += 1
+            try:
+                self._command(t, values)
+            except GyrostandError as exc:  # a failing snapshot must not end the run
+                log.error("command %s failed: %s", values, exc)
+
+    def _ack(self, code: int, seq: int, ok: bool, reason: str = "ok") -> None:
+        self.commands["acked" if ok else "nacked"] += 1
+        ref = self.cfg.responses.ack
+        if ref is not None:
+            self.sink.send([self.encoder.ack_frame(ref, code, seq, ok, reason,
+                                                   self.cfg.responses.node,
+                                                   timestamp=self.frame_time())])
+
+    def _command(self, t: float, values: dict[str, float]) -> None:
+        target = values.get("Target")
+        if target is not None and int(target) not in (255, self.cfg.responses.node):
+            self.commands["ignored"] += 1
+            log.info("command for node %d ignored (this is node %d)", int(target),
+                     self.cfg.responses.node)
+            return
+        code, seq = values.get("Command"), values.get("Sequence")
+        if code is None or seq is None:
+            log.warning("malformed command at t=%.3f: %s", t, values)
+            self._ack(int(code or 0), int(seq or 0), False, "malformed")
+            return
+        code, seq = int(code), int(seq)
+        name = COMMANDS.get(code)
+        log.info("command %s (seq %d) at t=%.3f", name or code, seq, t)
+        if name is None:
+            self._ack(code, seq, False, "unknown_command")
+        elif name == "start":
+            if self.state != "idle":
+                self._ack(code, seq, False, "wrong_state")
+                return
+            self.state = "running"
+            self._ack(code, seq, True)
+        elif name == "stop":
+            if self.stop_requested is not None:
+                self._ack(code, seq, False, "wrong_state")
+                return
+            self.stop_requested = "stop command"
+            self.state = "stopping"
+            self._ack(code, seq, True)
+        elif name == "reset":
+            for tr in self.trackers.values():
+                tr.reset()
+            self._ack(code, seq, True)
+        else:  # snapshot
+            self.snapshot(t)
+            self._ack(code, seq, True)
+
+    def snapshot(self, t: float) -> Path:
+        """Flush the files and write ``snapshot.json`` (current online estimates)."""
+        self.samples.flush()
+        for w in self.estimates.values():
+            w.flush()
+        doc = {"t": t, "gyros": {
+            name: {e.identifier: {"status": e.status, "samples": e.samples, "note": e.note,
+                                  "parameters": {k: {"value": _j(v), "std": _j(s)}
+                                                 for k, (v, s) in e.values.items()}}
+                   for e in tr.estimates()} for name, tr in self.trackers.items()}}
+        path = self.run_dir / "snapshot.json"
+        path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        self.send_results()
+        log.info("snapshot written to %s", path)
+        return path
+
+    # -- end of run --------------------------------------------------------------------
+    def stats(self) -> dict[str, Any]:
+        d = self.listener.stats()
+        dec = asdict(d)
+        dec["rejected_total"] = d.rejected_total
+        return {
+            "decoder": dec, "binner": asdict(self.binner.stats()),
+            "responses": {"result_rounds": self._rounds, "heartbeats": self._beats,
+                          "frames_sent": getattr(self.sink, "sent", 0),
+                          "send_errors": getattr(self.sink, "errors", 0)},
+            "commands": dict(self.commands),
+            "timing": {"bin_steps": len(self.step_ms),
+                       "step_ms_median": _quantile(self.step_ms, 0.5),
+                       "step_ms_p99": _quantile(self.step_ms, 0.99)},
+        }
+
+    def finish(self, reason: str, *, extra_stats: dict[str, Any] | None = None,
+               truths: dict[str, dict[str, float]] | None = None,
+               state: str = "stopped") -> RunOutcome:
+        """Close the files, run the final fits, write result.json and report.txt, send a
+        last result round (with the final ML) and a last heartbeat. Call after the driver
+        has delivered the last bins (its flush)."""
+        self.state = "stopping" if state != "fault" else state
+        self.samples.close()
+        for w in self.estimates.values():
+            w.close()
+        finals: list[GyroFinal] = []
+        extra: dict[str, list[OnlineEstimate]] = {}
+        for g in self.cfg.gyros:
+            cols = read_samples_csv(self.samples.paths[g.name])
+            tr = self.trackers[g.name]
+            f = fit_gyro(g, cols, self.cfg.sampling.dt,
+                         f"{self.run_dir.name}/{g.name}/samples.csv", None, tr.estimates())
+            finals.append(f)
+            ml = f.fits.get("ml")
+            if ml is not None and not isinstance(ml, str):
+                vals = {n: (e.value, e.std) for n, e in ml.parameters.items()}
+                extra[g.name] = [OnlineEstimate("ml", "warning" if ml.warnings else "ok",
+                                                vals, ml.n_observed, ml.residual_rms)]
+        self.send_results(extra)
+        self.state = state
+        self.heartbeat(self.frame_time())
+        stats = self.stats()
+        stats.update(extra_stats or {})
+        stats["stop_reason"] = reason
+        result = self.run_dir / "result.json"
+        write_result_json(result, self.cfg, self.source, self.run_dir, finals, stats)
+        report = self.run_dir / "report.txt"
+        write_report(report, self.cfg, self.source, finals, stats, truths or {})
+        log.info("run finished (%s): %s, %s", reason, result, report)
+        return RunOutcome(self.run_dir, result, report, finals, reason, state, stats)
+
+
+def _j(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
