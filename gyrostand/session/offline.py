@@ -12,7 +12,7 @@ binned too.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import can
@@ -34,16 +34,17 @@ __all__ = ["run_replay", "simulated_truths", "simulated_frames", "truth_params"]
 log = logging.getLogger(__name__)
 
 
-def run_replay(cfg: SessionConfig, log_path: str | Path, *, out: str | Path | None = None,
+def run_replay(cfg: SessionConfig, log_path: str | Path | Iterable[can.Message], *, out: str | Path | None = None,
                realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
                truths: dict[str, dict[str, float]] | None = None) -> RunOutcome:
-    """Replay ``log_path`` (any format python-can reads) through the pipeline, as fast as
-    possible unless ``realtime`` (paced to frame time / ``speed``)."""
+    """Replay ``log_path`` (any format python-can reads, or frames) through the pipeline,
+    as fast as possible unless ``realtime`` (paced to frame time / ``speed``)."""
+    what = str(log_path) if isinstance(log_path, str | Path) else "<frames>"
     run_dir = make_run_dir(out or cfg.output, cfg.name)
     runlog = RunLog(run_dir)
     try:
-        pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {log_path}")
-        log.info("replaying %s into %s", log_path, run_dir)
+        pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}")
+        log.info("replaying %s into %s", what, run_dir)
         for bins in replay(log_path, pipe.ingest, realtime=realtime, speed=speed,
                            pump_every=pump_every):
             pipe.step(bins)

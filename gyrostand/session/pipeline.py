@@ -163,6 +163,8 @@ class Pipeline:
         self.commands: dict[str, int] = {"received": 0, "acked": 0, "nacked": 0,
                                          "ignored": 0}
         self.step_ms: list[float] = []
+        self._logged_bad: tuple[int, ...] = (0, 0, 0, 0)
+        self._logged_t = -math.inf
         self._period, self._beat = r.period, r.heartbeat
 
     # -- per step ----------------------------------------------------------------------
@@ -213,13 +215,26 @@ class Pipeline:
         self._beats += 1
         self._last_beat_wall = self.wall()
         self._beat_frame_t = self.listener.last_timestamp
+        d, b = self.listener.stats(), self.binner.stats()
+        self._log_rejections(d, b, timestamp)
         if ref is None:
             return
-        d, b = self.listener.stats(), self.binner.stats()
         self.sink.send(self.encoder.status_frames(
             ref, self.state, self._beats - 1, bins=b.bins, gaps=b.gaps, decoded=d.decoded,
             rejected=d.rejected_total, bus_errors=d.bus_errors, late=b.late,
             timestamp=timestamp))
+
+    def _log_rejections(self, d: Any, b: Any, t: float, force: bool = False) -> None:
+        """Log what was rejected/lost since the last such line (at most every 10 s of
+        frame time, or when ``force``)."""
+        bad = (d.rejected_total, d.bus_errors, b.late, d.listener_errors)
+        if bad == self._logged_bad or not (force or t - self._logged_t >= 10.0):
+            return
+        self._logged_bad, self._logged_t = bad, t
+        rej = ", ".join(f"{k} {v}" for k, v in d.rejected.items() if v) or "none"
+        log.warning("rejected frames %d (%s); bus errors %d, counter jumps %d, late samples "
+                    "%d, listener errors %d", d.rejected_total, rej, d.bus_errors,
+                    d.counter_jumps, b.late, d.listener_errors)
 
     def send_results(self, extra: dict[str, list[OnlineEstimate]] | None = None) -> None:
         """One result round: every gyro's online estimates (plus ``extra`` per gyro, e.g.
@@ -358,6 +373,8 @@ class Pipeline:
         self.send_results(extra)
         self.state = state
         self.heartbeat(self.frame_time())
+        self._log_rejections(self.listener.stats(), self.binner.stats(), self.frame_time(),
+                             force=True)
         stats = self.stats()
         stats.update(extra_stats or {})
         stats["stop_reason"] = reason

@@ -1,0 +1,53 @@
+"""The run/replay/simulate/demo subcommands: exit codes, printed paths, errors."""
+
+from __future__ import annotations
+
+import json
+
+from sessionhelpers import DEMO, ROOT, write_cfg_yaml
+
+from gyrostand.can.replay import read_log
+from gyrostand.cli import main
+from gyrostand.cli.demo import find_demo_config
+
+
+def _cfg(tmp_path, channel="gyrostand-cli"):
+    return write_cfg_yaml(tmp_path / "s.yaml", tmp_path / "runs",
+                          {"interface": "virtual", "channel": channel,
+                           "preserve_timestamps": True},
+                          duration=100.0, rates={"drift": 20, "temperature": 10})
+
+
+def test_simulate_to_a_log_then_replay_it(tmp_path, capsys):
+    cfg = _cfg(tmp_path)
+    log = tmp_path / "sim.blf"
+    assert main(["simulate", str(cfg), "--out", str(log)]) == 0
+    n = sum(1 for _ in read_log(log))
+    assert capsys.readouterr().out.strip() == f"wrote {n} frames to {log}"
+    assert 3000 < n <= 3030  # 101 s (t = 0..100) x 30 Hz, 0.1 % dropped
+    assert main(["replay", str(cfg), str(log), "--out", str(tmp_path / "rep")]) == 0
+    out = capsys.readouterr().out
+    assert "stopped: end of log" in out and "markov.beta" in out
+    result = next(line.split(None, 1)[1] for line in out.splitlines()
+                  if line.startswith("result:"))
+    doc = json.loads(open(result).read())
+    assert doc["gyros"]["az"]["bins"] == 101 and doc["source"] == f"replay of {log}"
+
+
+def test_demo_runs_from_another_folder(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert find_demo_config() == ROOT / "configs" / "demo.yaml" == DEMO
+    cfg = _cfg(tmp_path, "gyrostand-cli-demo")
+    assert main(["demo", "--config", str(cfg), "--out", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "stop acknowledged" in out and "stopped: stop command" in out
+    assert "truth" in out and "report:" in out
+
+
+def test_errors_exit_2_with_a_message(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "missing.yaml")]) == 2
+    assert "error:" in capsys.readouterr().err
+    assert main(["simulate", str(ROOT / "tests" / "data" / "foreign.yaml")]) == 2
+    assert "simulate: missing" in capsys.readouterr().err
+    assert main(["replay", str(_cfg(tmp_path)), str(tmp_path / "none.blf")]) == 2
+    assert "log file not found" in capsys.readouterr().err
