@@ -223,3 +223,59 @@ def foh_weights(beta: float, dt: float) -> tuple[float, float, float]:
     else:
         a0 = (1.0 - phi * (1.0 + x)) / (beta * x)
     return phi, float(a0), float(total - a0)
+
+
+@njit(cache=True, nogil=True)
+def kf_smooth(phi, q, p0, r, y):  # pragma: no cover - compiled
+    """Fixed-interval (Rauch-Tung-Striebel) smoother of the diagonal model of :func:`kf_run`.
+
+    Returns ``(s, v)``: the smoothed signal ``s_k = H x_{k|N}`` (sum of the stochastic
+    states) and its variance ``v_k = H P_{k|N} H'``, shape (N,). NaN ``y`` = missing.
+
+        forward:  x_{k|k-1}, P_{k|k-1}, x_{k|k}, P_{k|k}   (Joseph form)
+        backward: J_k = P_{k|k} F' P_{k+1|k}^+
+                  x_{k|N} = x_{k|k} + J_k (x_{k+1|N} - x_{k+1|k})
+                  P_{k|N} = P_{k|k} + J_k (P_{k+1|N} - P_{k+1|k}) J_k'
+    """
+    n = phi.shape[0]
+    N = y.shape[0]
+    xp = np.zeros((N, n))
+    Pp = np.zeros((N, n, n))
+    xf = np.zeros((N, n))
+    Pf = np.zeros((N, n, n))
+    x = np.zeros(n)
+    P = np.zeros((n, n))
+    for i in range(n):
+        P[i, i] = p0[i]
+    for k in range(N):
+        xp[k] = x
+        Pp[k] = P
+        if not np.isnan(y[k]):
+            PH = P.sum(axis=1)
+            f = PH.sum() + r
+            K = PH / f
+            e = y[k] - x.sum()
+            x = x + K * e
+            A = P - np.outer(K, PH)
+            AH = A.sum(axis=1)
+            P = A - np.outer(AH, K) + r * np.outer(K, K)
+            P = 0.5 * (P + P.T)
+        xf[k] = x
+        Pf[k] = P
+        x = phi * x
+        P = P * np.outer(phi, phi)
+        for i in range(n):
+            P[i, i] += q[i]
+    s = np.empty(N)
+    v = np.empty(N)
+    xs = xf[N - 1].copy()
+    Ps = Pf[N - 1].copy()
+    s[N - 1] = xs.sum()
+    v[N - 1] = Ps.sum()
+    for k in range(N - 2, -1, -1):
+        J = (Pf[k] * phi[np.newaxis, :]) @ np.linalg.pinv(Pp[k + 1])
+        xs = xf[k] + J @ (xs - xp[k + 1])
+        Ps = Pf[k] + J @ (Ps - Pp[k + 1]) @ J.T
+        s[k] = xs.sum()
+        v[k] = Ps.sum()
+    return s, v

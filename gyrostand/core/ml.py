@@ -24,9 +24,11 @@ from __future__ import annotations
 import itertools
 import logging
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
 
 from ..errors import IdentificationError, ModelError
 from .data import Samples
@@ -137,6 +139,23 @@ class _Problem:
             s2 = 1.0
             ll = -0.5 * (n * LOG_2PI + slogf + S)
         return float(ll), (p, theta, s2, A)
+
+    def full_loglik(self, p: Mapping[str, float]) -> float:
+        """Exact ln L at natural parameters ``p`` (nothing concentrated): equals
+        :meth:`Model.loglik`, from the Gram matrix of the filtered columns."""
+        X = self.model.regressors(p, self.ctx)
+        phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
+        Y = np.empty((X.shape[0], 1 + X.shape[1]))
+        Y[:, 0] = self.samples.drift
+        Y[:, 1:] = X
+        _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        if not np.isfinite(slogf):
+            return -np.inf
+        c = np.empty(G.shape[0])
+        c[0] = 1.0
+        for j, name in enumerate(self.linear):
+            c[1 + j] = -p[name]
+        return float(-0.5 * (n * LOG_2PI + slogf + c @ G @ c))
 
     def natural(self, z: np.ndarray) -> tuple[dict[str, float], np.ndarray, float]:
         """Full parameter dict at ``z`` (scale and θ̂ filled in), GLS info matrix, ln L."""
@@ -257,7 +276,18 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
     return 0.5 * (cov + cov.T), warnings
 
 
-def ml(samples: Samples, model: Model, *, sigma: float | None = None,
+def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
+    """Exact maximum-likelihood fit of every free parameter of ``model``.
+
+    Options as :func:`ml_fit`. BLAS is held to one thread meanwhile: the algebra here is on
+    tiny matrices, where OpenBLAS's thread hand-offs cost more than the work (measured:
+    0.65 s → 0.24 s for a 6-hour fit, benchmarks/ml_speed.py).
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return ml_fit(samples, model, **options)
+
+
+def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
        fixed: Mapping[str, float] | None = None, n_local: int | None = None,
        start: Mapping[str, float] | None = None, std_errors: bool = True) -> FitResult:
     """Exact maximum-likelihood fit of every free parameter of ``model``.
@@ -284,10 +314,15 @@ def ml(samples: Samples, model: Model, *, sigma: float | None = None,
 
     starts = _start_grid(prob, _lsq_beta(samples, model))
     if start:
+        # a previous fit's values; parameters it lacks start mid-grid
         z0 = []
-        for n in prob.znames:
-            v = start[n] / (start.get(prob.ref, 1.0) if prob.ref and n in prob.stds else 1.0)
-            z0.append(np.log(max(v, 1e-300)))
+        mid = np.mean(starts, axis=0) if starts else np.zeros(len(prob.znames))
+        for i, n in enumerate(prob.znames):
+            ref = start.get(prob.ref, 1.0) if prob.ref and n in prob.stds else 1.0
+            if n not in start or not start[n] > 0 or not ref > 0:
+                z0.append(mid[i])
+            else:
+                z0.append(np.log(start[n] / ref))
         starts.append(np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds]))
     at_bound: list[str] = []
     lo = np.array([b[0] for b in prob.bounds])
@@ -399,7 +434,7 @@ def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], fr
         for n in free:
             if model.kind(n) in ("rate", "time") and q[n] <= 0:
                 return -np.inf
-        return model.loglik(q, samples)
+        return prob.full_loglik(q)
 
     warnings: list[str] = []
     # a noise level whose removal costs no likelihood is at its boundary (≈ 0) too
