@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import demo, identify, replay, run, simulate
+from . import demo, diagnose, fit, identify, replay, run, simulate
 
-SUBCOMMANDS = (run, replay, simulate, demo, identify)
+SUBCOMMANDS = (run, replay, simulate, demo, identify, diagnose, fit)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,6 +42,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`, which closed early
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -1,0 +1,79 @@
+"""``gyrostand diagnose RUN``: where the current model fails and which effect is missing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from ..core.candidates import Report
+from ..workbench import run_diagnose
+from .workbench_args import add_subject_args, fmt_estimate, subject_of
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("diagnose", help="diagnose the current model of a run and rank the "
+                                        "missing effects")
+    add_subject_args(p)
+    p.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    subject = subject_of(args)
+    rep = run_diagnose(subject)
+    if args.json:
+        json.dump(rep.to_dict(), sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(render(rep, f"{subject.samples.source} (gyro {subject.gyro})"))
+        print(f"\nledger: {subject.ledger_path}")
+    return 0
+
+
+def render(rep: Report, source: str) -> str:
+    d = rep.diagnosis
+    lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
+             f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
+    lines += [f"         - {r}" for r in rep.reasons]
+    lines.append("")
+    lines.append("parameters (ML)")
+    for k, e in rep.fit.parameters.items():
+        lines.append(f"  {k:<16} {fmt_estimate(e.value, e.std, e.unit, e.fixed)}")
+    lines.append("")
+    lines.append(f"residuals: RMS {d.rms:.4g} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
+                 f"p = {d.ljung_box_p:.3g} over {d.lags} lags, normalized innovations "
+                 f"{d.nis_mean:.3f} (95 % band {d.nis_band[0]:.3f}–{d.nis_band[1]:.3f})")
+    lines.append("")
+    lines.append("per segment of the temperature profile")
+    lines.append(f"  {'kind':<8} {'t from':>8} {'t to':>8} {'T from':>7} {'T to':>7} "
+                 f"{'mean':>10} {'RMS':>10} {'smoothed':>10}")
+    for s in d.segments:
+        lines.append(f"  {s['kind']:<8} {s['t_start']:8.0f} {s['t_stop']:8.0f} "
+                     f"{s['temp_start']:7.2f} {s['temp_stop']:7.2f} {s['mean']:10.3g} "
+                     f"{s['rms']:10.3g} {s['smoothed_mean']:10.3g}")
+    lines.append("")
+    m = max(len(rep.candidates), 1)
+    lines.append(f"candidates, best first (significant: p < {rep.alpha / m:.2g}, "
+                 f"Bonferroni over {m})")
+    lines.append(f"  {'term':<12} {'LR':>8} {'df':>3} {'p':>9} {'ΔAIC':>8} {'ΔBIC':>8} "
+                 f"{'RMS after':>10}  effect")
+    for c in rep.candidates:
+        eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit)}"
+                        for k, e in c.effect.items())
+        star = "*" if c.p_value < rep.alpha / m else " "
+        lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
+                     f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
+    for la in rep.look_alikes:
+        lines.append("")
+        lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
+                     f"equally well here (ΔAIC {la['delta_aic'][0]:.1f} vs "
+                     f"{la['delta_aic'][1]:.1f}); to separate them: {la['advice']}")
+    if rep.candidates and not rep.adequate and rep.significant:
+        best = rep.significant[0]
+        lines.append("")
+        lines.append(f"next: gyrostand fit RUN --add {best.term}")
+    for w in rep.fit.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)

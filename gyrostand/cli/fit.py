@@ -1,0 +1,52 @@
+"""``gyrostand fit RUN --add TERM [--add ...] [--remove TERM]``: refit, before/after."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from ..workbench import FitStep, run_fit
+from .workbench_args import add_subject_args, fmt_estimate, subject_of
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("fit", help="add or remove model terms, refit, show before/after")
+    add_subject_args(p)
+    p.add_argument("--add", action="append", default=[], metavar="TERM")
+    p.add_argument("--remove", action="append", default=[], metavar="TERM")
+    p.add_argument("--json", action="store_true", help="print the step as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    subject = subject_of(args)
+    step = run_fit(subject, args.add, args.remove)
+    if args.json:
+        json.dump(step.to_dict(), sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(render(step))
+        print(f"\nledger: {subject.ledger_path}")
+    return 0
+
+
+def render(step: FitStep) -> str:
+    b, a = step.before, step.after
+    lines = [f"{'':<18} {'before':>30}   {'after':>30}",
+             f"{'model':<18} {','.join(b.model.names):>30}   {','.join(a.model.names):>30}"]
+    for k in dict.fromkeys(list(b.parameters) + list(a.parameters)):
+        eb, ea = b.parameters.get(k), a.parameters.get(k)
+        sb = fmt_estimate(eb.value, eb.std, eb.unit, eb.fixed) if eb else "—"
+        sa = fmt_estimate(ea.value, ea.std, ea.unit, ea.fixed) if ea else "—"
+        lines.append(f"{k:<18} {sb:>30}   {sa:>30}")
+    lines.append(f"{'log-likelihood':<18} {b.loglik:>30.3f}   {a.loglik:>30.3f}")
+    lines.append(f"{'residual RMS':<18} {b.residual_rms:>30.5g}   {a.residual_rms:>30.5g}")
+    change = (a.residual_rms / b.residual_rms - 1) * 100 if b.residual_rms else 0.0
+    lines.append("")
+    lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df, p = {step.p_value:.3g}; "
+                 f"residual RMS {change:+.2f} %")
+    for w in a.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
