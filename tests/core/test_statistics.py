@@ -1,7 +1,10 @@
 """Statistical truth: ML reaches the Cramér–Rao bound (Monte Carlo).
 
-The full check (marked ``slow``) runs 200 realizations per case and scenario, as issue 2
-demands: RMSE of β and γ within 1.15 × √CRLB wherever √CRLB < 20 % of the truth. CI runs a
+The full check (marked ``slow``) runs 400 realizations per case and scenario (issue 2 asks
+for at least 200; at 200 the RMSE's own sampling error, ≈5 %, is as large as the margin
+between ML's efficiency in C2 with σ estimated, ≈1.11, and the 1.15 criterion) with the
+bound from 300 simulated information matrices: RMSE of β and γ within 1.15 × √CRLB
+wherever √CRLB < 20 % of the truth. CI runs a
 reduced set (fewer runs, so a wider but still failing-capable bound: with n runs the RMSE's
 own relative std is about 1/√(2n), 9 % at n = 60).
 """
@@ -20,14 +23,14 @@ from ..conftest import truth
 TARGETS = ("markov.beta", "temp.gamma")
 
 
-def monte_carlo(case, sigma_known, sigma_v, runs, seed=1000):
+def monte_carlo(case, sigma_known, sigma_v, runs, seed=1000, n_mc=60):
     m = Model.parse("markov,temp")
     p = truth(case, sigma_v=sigma_v)
     t, T = paper_profile().grid(1.0)
     free = ["markov.beta", "temp.gamma"] + ([] if sigma_known else ["markov.sigma"])
     if sigma_v > 0:
         free.append("white.sigma")
-    bound = crlb(m, p, t, T, free=free, n_mc=60)
+    bound = crlb(m, p, t, T, free=free, n_mc=n_mc)
     est = {n: [] for n in TARGETS}
     sds = {n: [] for n in TARGETS}
     rng = np.random.default_rng(seed)
@@ -64,7 +67,7 @@ def test_ml_efficiency_reduced(case, sigma_known):
 @pytest.mark.parametrize("sigma_known", [True, False])
 @pytest.mark.parametrize("sigma_v", [0.0, 0.05])
 def test_ml_efficiency_full(case, sigma_known, sigma_v):
-    res = monte_carlo(case, sigma_known, sigma_v, runs=200)
+    res = monte_carlo(case, sigma_known, sigma_v, runs=400, n_mc=300)
     checked = 0
     for n, r in res.items():
         if r["rel_crlb"] < 0.2:
