@@ -34,7 +34,7 @@ import numpy as np
 from ..config import GyroConfig, LkfConfig
 from ..core.data import Samples
 from ..core.identify import identify
-from ..core.lkf import OnlineLKF, held_names, held_values
+from ..core.lkf import OnlineLKF, held_names, held_values, lkf_layout
 from ..core.lsq import OnlineLSQ
 from ..core.lsq import solve as lsq_solve
 from ..core.model import Model
@@ -130,6 +130,7 @@ class _LkfTrack:
     failed: str = ""
 
     def __post_init__(self) -> None:
+        lkf_layout(self.model)  # raises ModelError for terms the LKF cannot represent
         self.next_try = self.cfg.warmup
         if not self.cfg.needs_warmup:
             self._start(resolve_lkf_point(self.model, self.cfg, None))

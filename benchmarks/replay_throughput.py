@@ -1,0 +1,111 @@
+"""Replay throughput of the whole daemon pipeline vs bare ``can.LogReader`` iteration.
+
+A 1-million-frame BLF of the three-gyro stand (``configs/three-gyros.yaml``: 3 gyros x
+(200 Hz drift + 10 Hz temperature), jitter, drops) is generated once (cached in the temp
+folder), then, in this one process:
+
+* bare: ``for msg in can.LogReader(path): pass``;
+* pipeline: ``gyrostand replay`` (``session.offline.run_replay``): decode, check, bin,
+  online LKF + LSQ per bin, samples/estimates CSVs, response frames built; the final batch
+  fits (LSQ, LKF, ML per gyro) are timed separately.
+
+Printed: frames/s of each, and the ratio pipeline/bare (anchor: >= 0.7).
+
+    .venv/bin/python benchmarks/replay_throughput.py [--frames N] [--repeat R]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import logging
+import tempfile
+import time
+from pathlib import Path
+
+import can
+import yaml
+
+from gyrostand.can.framesim import write_log
+from gyrostand.config import parse_config
+from gyrostand.session import offline
+from gyrostand.session.offline import simulated_frames
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIAD = ROOT / "configs" / "three-gyros.yaml"
+FRAMES_PER_S = 3 * (200 + 10)
+
+
+def triad_cfg(frames: int, out: Path):
+    d = yaml.safe_load(TRIAD.read_text())
+    d = copy.deepcopy(d)
+    d["session"]["output"] = str(out)
+    d["simulate"]["duration"] = float(round(frames / FRAMES_PER_S))
+    return parse_config(d, source=str(TRIAD), base_dir=TRIAD.parent)
+
+
+def bare(path: Path) -> tuple[int, float]:
+    t = time.perf_counter()
+    n = 0
+    for _ in can.LogReader(path):
+        n += 1
+    return n, time.perf_counter() - t
+
+
+def pipeline(cfg, path: Path, out: Path) -> tuple[float, float, dict]:
+    """(streaming s, final-fit s, stats) of one replay."""
+    marks: dict[str, float] = {}
+    finish = offline.Pipeline.finish
+
+    def timed_finish(self, *a, **k):
+        marks["stream_end"] = time.perf_counter()
+        return finish(self, *a, **k)
+
+    offline.Pipeline.finish = timed_finish  # type: ignore[method-assign]
+    try:
+        t = time.perf_counter()
+        outcome = offline.run_replay(cfg, path, out=out)
+        end = time.perf_counter()
+    finally:
+        offline.Pipeline.finish = finish  # type: ignore[method-assign]
+    return marks["stream_end"] - t, end - marks["stream_end"], outcome.stats
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--frames", type=int, default=1_000_000)
+    ap.add_argument("--repeat", type=int, default=2)
+    args = ap.parse_args()
+    logging.basicConfig(level=logging.ERROR)
+    for h in logging.getLogger().handlers:  # run.log lowers gyrostand's level to INFO
+        h.setLevel(logging.ERROR)
+    tmp = Path(tempfile.gettempdir())
+    out = Path(tempfile.mkdtemp(prefix="gyrostand_bench_replay_"))
+    cfg = triad_cfg(args.frames, out)
+    path = tmp / f"gyrostand_bench_{args.frames}.blf"
+    if not path.is_file():
+        t = time.perf_counter()
+        n = write_log(path, simulated_frames(cfg))
+        print(f"generated {n} frames into {path} in {time.perf_counter() - t:.1f} s")
+    logging.getLogger("gyrostand").setLevel(logging.ERROR)
+    best_bare, best_stream, fit_s = float("inf"), float("inf"), 0.0
+    n = 0
+    stats: dict = {}
+    for _ in range(args.repeat):  # interleaved, best of R (the machine is shared)
+        n, tb = bare(path)
+        best_bare = min(best_bare, tb)
+        ts, fit_s, stats = pipeline(cfg, path, out)
+        best_stream = min(best_stream, ts)
+    dec = stats["decoder"]
+    print(f"file: {path.name}, {n} frames, {path.stat().st_size / 1e6:.1f} MB")
+    print(f"bare can.LogReader:  {n / best_bare:10,.0f} frames/s ({best_bare:.2f} s)")
+    print(f"pipeline (replay):   {n / best_stream:10,.0f} frames/s ({best_stream:.2f} s); "
+          f"decoded {dec['decoded']}, rejected {dec['rejected_total']}, "
+          f"bins {stats['binner']['bins']}")
+    print(f"final batch fits:    {fit_s:.2f} s (3 gyros; lsq, lkf, ml)")
+    print(f"ratio pipeline/bare: {best_bare / best_stream:.2f}  (anchor >= 0.70)")
+    print(f"  incl. final fits:  {best_bare / (best_stream + fit_s):.2f}")
+
+
+if __name__ == "__main__":
+    main()
