@@ -249,10 +249,12 @@ class GyroTracker:
                 log.warning("gyro %s: online %s unavailable: %s", self.gyro.name, ident, exc)
         self._last_T = NAN
         self.bins = 0
+        self._cached: list[OnlineEstimate] | None = None
 
     def update(self, drift: float, temp: float) -> None:
         """One closed bin: mean drift (NaN = gap) and mean temperature (degC, NaN = none)."""
         self.bins += 1
+        self._cached = None
         if math.isnan(temp):
             temp = self._last_T
         else:
@@ -268,7 +270,10 @@ class GyroTracker:
         return t.point if isinstance(t, _LkfTrack) else None
 
     def estimates(self) -> list[OnlineEstimate]:
-        """Current estimate of every online identifier, in config order."""
+        """Current estimate of every online identifier, in config order (computed once
+        per bin)."""
+        if self._cached is not None:
+            return self._cached
         out = []
         for ident in self.identifiers:
             if ident in self._failed:
@@ -277,4 +282,5 @@ class GyroTracker:
                                           0, NAN, self._failed[ident]))
             else:
                 out.append(self._tracks[ident].estimate())
+        self._cached = out
         return out
