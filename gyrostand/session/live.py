@@ -85,7 +85,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     runlog = RunLog(run_dir)
     stop = stop_event or threading.Event()
     signalled: list[str] = []
-    old_handlers: dict[int, Any] = {}
+    old_handlers: dict[signal.Signals, Any] = {}
     try:
         sink = BusSink(bus)
         pipe = Pipeline(cfg, run_dir, sink, source="live", start_idle=start_idle)
@@ -98,14 +98,16 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             for sig in (signal.SIGINT, signal.SIGTERM):
                 old_handlers[sig] = signal.signal(sig, on_signal)
         notifier = can.Notifier(bus, [pipe.listener, recorder, watch], timeout=0.05)
-        log.info("ready: session %s on %s, run folder %s", cfg.name, bus.channel_info,
-                 run_dir)
-        if on_ready is not None:
-            on_ready(run_dir)
-        reason, state = _loop(pipe, recorder, watch, notifier, stop, signalled, duration,
-                              poll)
-        notifier.stop(timeout=2.0)
-        recorder.stop()
+        try:
+            log.info("ready: session %s on %s, run folder %s", cfg.name, bus.channel_info,
+                     run_dir)
+            if on_ready is not None:
+                on_ready(run_dir)
+            reason, state = _loop(pipe, recorder, watch, notifier, stop, signalled,
+                                  duration, poll)
+        finally:  # the raw log and the bins end with the same frame, even on an error
+            notifier.stop(timeout=2.0)
+            recorder.stop()
         pipe.step(pipe.ingest.finish())
         outcome = pipe.finish(reason, state=state, truths=truths, extra_stats={
             "recorder": {"frames": recorder.frames, "flushes": recorder.flushes,

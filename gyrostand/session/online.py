@@ -261,8 +261,14 @@ class GyroTracker:
             self._last_T = temp
         if math.isnan(temp):  # no temperature yet: nothing to identify with
             return
-        for track in self._tracks.values():
-            track.update(drift, temp)
+        for ident, track in list(self._tracks.items()):
+            try:
+                track.update(drift, temp)
+            except Exception as exc:  # an identifier's failure must not stop the daemon
+                log.exception("gyro %s: online %s failed at bin %d; disabled until reset",
+                              self.gyro.name, ident, self.bins)
+                del self._tracks[ident]
+                self._failed[ident] = f"failed at bin {self.bins}: {exc}"
 
     @property
     def lkf_point(self) -> LkfPoint | None:

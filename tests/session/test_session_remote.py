@@ -171,3 +171,27 @@ def test_run_process_stops_cleanly_on_sigterm(tmp_path, server):
     assert doc["stats"]["decoder"]["received"] == len(frames)
     assert doc["gyros"]["az"]["bins"] == 61
     assert (run / "report.txt").is_file() and (run / "raw.blf").stat().st_size > 0
+
+
+def test_run_process_ends_with_fault_when_the_bus_dies(tmp_path):
+    port = _free_port()
+    srv = subprocess.Popen(
+        [sys.executable, "-m", "can_remote", "--interface", "virtual", "--channel",
+         f"gyrostand-remote-dies-{port}", "--host", "127.0.0.1", "--port", str(port)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _wait_port(port)
+        bus = {"interface": "remote", "channel": f"ws://127.0.0.1:{port}/"}
+        cfg_path = write_cfg_yaml(tmp_path / "dies.yaml", tmp_path / "runs", bus)
+        daemon = Daemon(cfg_path, tmp_path / "runs")
+        ready = daemon.wait_for("ready: ")
+    finally:
+        srv.kill()  # the server goes away under the daemon
+        srv.wait(10)
+    rc, err = daemon.finish()
+    assert rc == 1, err
+    assert any(line.startswith("stopped: bus failure") and "state fault" in line
+               for line in daemon.out), daemon.out
+    doc = json.loads((Path(ready.split(": ", 1)[1]) / "result.json").read_text())
+    assert doc["stats"]["stop_reason"].startswith("bus failure")
+    assert all("error" in f for f in doc["gyros"]["az"]["fits"].values())  # no bins
