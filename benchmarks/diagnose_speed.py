@@ -1,0 +1,61 @@
+"""Benchmark: ``diagnose`` with every candidate on a 6-hour run (21,600 one-second samples).
+
+Anchor (issue 4): the whole diagnosis — the ML fit of the current model, the residual
+diagnostics and a refit with each of the vocabulary's candidate terms — under 10 s on this
+machine. Prints the time of each part, each candidate's fit, and the ratio to the anchor.
+The data hide a ``temp_rate`` effect so that the ranking has something to find.
+
+Run: ``.venv/bin/python benchmarks/diagnose_speed.py``
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from gyrostand.core.candidates import rank_candidates
+from gyrostand.core.data import Samples
+from gyrostand.core.diagnostics import diagnose_fit
+from gyrostand.core.ml import ml
+from gyrostand.core.model import Model
+from gyrostand.core.profiles import chamber_profile
+from gyrostand.core.simulate import simulate
+
+ANCHOR_S = 10.0
+
+
+def main() -> None:
+    truth = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+             "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 5.0}
+    s = simulate(Model.parse("markov,temp,bias,temp_rate"), truth, chamber_profile(6.0),
+                 seed=1)
+    rng = np.random.default_rng(2)
+    temp = np.round((s.temp + 0.01 * rng.standard_normal(len(s))) / 0.05) * 0.05
+    s = Samples.from_arrays(s.t, s.drift, temp)
+    m = Model.parse("markov,temp,bias")
+    ml(s, m)  # warm-up: numba's compiled kernels are loaded from cache once per process
+    print(f"data: {len(s)} samples (6-h chamber cycle), hidden temp_rate; model {m}; "
+          f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    t0 = time.perf_counter()
+    fit = ml(s, m)
+    t1 = time.perf_counter()
+    diag = diagnose_fit(fit, s)
+    t2 = time.perf_counter()
+    cands = rank_candidates(s, m, fit)
+    t3 = time.perf_counter()
+    total = t3 - t0
+    print(f"ML fit of the current model   {t1 - t0:7.2f} s")
+    print(f"residual diagnostics          {t2 - t1:7.2f} s  (Ljung-Box p {diag.ljung_box_p:.3g})")
+    print(f"candidate refits ({len(cands)})         {t3 - t2:7.2f} s")
+    for c in sorted(cands, key=lambda c: -c.seconds):
+        print(f"    {c.term:<12} {c.seconds:6.2f} s   LR {c.lr_stat:8.2f}  p {c.p_value:.2g}")
+    print(f"ranked first: {cands[0].term}")
+    print(f"total diagnose {total:.2f} s = {total / ANCHOR_S:.2f} x the {ANCHOR_S:.0f}-s anchor "
+          f"({'PASS' if total < ANCHOR_S else 'MISS'}); "
+          f"mean per candidate {(t3 - t2) / len(cands):.2f} s")
+
+
+if __name__ == "__main__":
+    main()
