@@ -46,6 +46,8 @@ REASONS = (
     "overflow",          # the sample buffer (or command queue) was full
 )
 _R = {name: i for i, name in enumerate(REASONS)}
+_isfinite = math.isfinite
+_NEG_INF = -math.inf
 
 Sample = tuple[int, int, float, float]
 Command = tuple[float, dict[str, float]]
@@ -91,10 +93,13 @@ class DecodeStats:
 class _Route:
     """Fast-path entry for one frame id."""
 
-    __slots__ = ("message", "length", "extract", "is_command", "last_t")
+    __slots__ = ("message", "decode", "length", "extract", "is_command", "last_t")
 
     def __init__(self, message, length: int) -> None:
         self.message = message
+        # decode(data, decode_choices) -> {signal: value}; cantools' decode without the
+        # container dispatch of Message.decode (our routes are plain or multiplexed)
+        self.decode = message.decode if message.is_container else message.decode_simple
         self.length = length
         # (gyro, channel, signal name, minimum, maximum, counter signal or None, modulus)
         self.extract: list[tuple[int, int, str, float, float, str | None, int]] = []
@@ -189,18 +194,18 @@ class DecodingListener(can.Listener):
             self._reject("wrong_dlc")
             return
         t = msg.timestamp
-        if not math.isfinite(t):
+        if not _isfinite(t):
             self._reject("bad_timestamp")
             return
         if t < route.last_t:
             self._reject("non_monotonic")
             return
-        ref_t = route.last_t if route.last_t > -math.inf else self._last_t
-        if ref_t > -math.inf and t - ref_t > self.max_gap:
+        ref_t = route.last_t if route.last_t > _NEG_INF else self._last_t
+        if ref_t > _NEG_INF and t - ref_t > self.max_gap:
             self._reject("time_jump")
             return
         try:
-            values = route.message.decode(bytes(data), decode_choices=False)
+            values = route.decode(data, False)
         except Exception:
             self._reject("undecodable")
             return
@@ -213,6 +218,34 @@ class DecodingListener(can.Listener):
             self._last_t = max(self._last_t, t)
             n[1] += 1
             n[4] += 1
+            return
+        extract = route.extract
+        if len(extract) == 1:  # the common case, one mapped signal: same steps, no lists
+            g, c, name, lo, hi, cname, mod = extract[0]
+            v = values.get(name)
+            if v is None:  # multiplexed signal not selected by this frame
+                n[2] += 1
+                return
+            v = float(v)
+            if not lo <= v <= hi:  # also false for NaN
+                self._reject("out_of_range")
+                return
+            if len(self._buf) >= self.capacity:
+                self._reject("overflow")
+                return
+            route.last_t = t
+            if t > self._last_t:
+                self._last_t = t
+            if cname is not None:
+                cv = values.get(cname)
+                if cv is not None:
+                    prev = self._last_counter.get((g, c))
+                    if prev is not None and (int(cv) - prev) % mod != 1 % mod:
+                        n[5] += 1
+                    self._last_counter[(g, c)] = int(cv)
+            self._buf.append((g, c, t, v))
+            n[1] += 1
+            n[3] += 1
             return
         out: list[Sample] = []
         counted: list[tuple[int, int, str, int]] = []
