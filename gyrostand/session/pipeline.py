@@ -10,8 +10,8 @@ and calls :meth:`Pipeline.step` with the bins that closed. Per step, in this ord
    round is sent: per gyro and online identifier, the ``GS_RESULT`` value/std frames of
    every model parameter and a ``GS_SUMMARY`` frame;
 3. commands received since the last step are handled and acknowledged;
-4. when frame time crosses a multiple of ``responses.heartbeat`` (s), the 3-page
-   ``GS_STATUS`` heartbeat is sent.
+4. when ``responses.heartbeat`` s of frame time have passed since the last beat, the
+   3-page ``GS_STATUS`` heartbeat is sent.
 
 All timing is frame time (the newest accepted frame's timestamp, s). Only
 :meth:`Pipeline.wall_tick` reads the wall clock: live drivers call it so the heartbeat
@@ -156,6 +156,7 @@ class Pipeline:
         self._next_result = -math.inf
         self._next_beat = -math.inf
         self._beat_frame_t = -math.inf
+        self._last_beat_ts = -math.inf
         self._last_beat_wall = wall()
         self._beats = 0
         self._rounds = 0
@@ -182,7 +183,6 @@ class Pipeline:
         self._commands()
         t = self.listener.last_timestamp
         if t >= self._next_beat and math.isfinite(t):
-            self._next_beat = (math.floor(t / self._beat) + 1) * self._beat
             self.heartbeat(t)
 
     def _bins(self, bins: Sequence[Bin]) -> None:
@@ -195,12 +195,15 @@ class Pipeline:
             self.estimates[b.gyro].write(b.t, tr.estimates())
 
     def wall_tick(self) -> None:
-        """Live only: keep the 1-Hz heartbeat going (wall-clock timestamps) while no new
-        frame has arrived since the last beat; flush the files."""
+        """Live only: keep the heartbeat going while no new frame has arrived since the
+        last beat; flush the files. Such a beat is stamped with the last beat's timestamp
+        plus the wall time elapsed since (so beat timestamps keep increasing in frame
+        time), or with the wall clock before the first frame."""
         now = self.wall()
-        t = self.listener.last_timestamp
-        if now - self._last_beat_wall >= self._beat and t <= self._beat_frame_t:
-            self.heartbeat(now)
+        elapsed = now - self._last_beat_wall
+        if elapsed >= self._beat and self.listener.last_timestamp <= self._beat_frame_t:
+            framed = math.isfinite(self.listener.last_timestamp)
+            self.heartbeat(self._last_beat_ts + elapsed if framed else now)
         self.samples.flush()
         for w in self.estimates.values():
             w.flush()
@@ -215,6 +218,9 @@ class Pipeline:
         self._beats += 1
         self._last_beat_wall = self.wall()
         self._beat_frame_t = self.listener.last_timestamp
+        if math.isfinite(self._beat_frame_t):  # frame time runs: beats a period apart
+            self._last_beat_ts = timestamp
+            self._next_beat = timestamp + self._beat
         d, b = self.listener.stats(), self.binner.stats()
         self._log_rejections(d, b, timestamp)
         if ref is None:
@@ -372,7 +378,7 @@ class Pipeline:
                                                 vals, ml.n_observed, ml.residual_rms)]
         self.send_results(extra)
         self.state = state
-        self.heartbeat(self.frame_time())
+        self.heartbeat(max(self.frame_time(), self._last_beat_ts))
         self._log_rejections(self.listener.stats(), self.binner.stats(), self.frame_time(),
                              force=True)
         stats = self.stats()
