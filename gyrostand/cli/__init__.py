@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import demo, diagnose, fit, identify, replay, run, simulate
+from . import demo, diagnose, fit, identify, replay, report, run, simulate
 
-SUBCOMMANDS = (run, replay, simulate, demo, identify, diagnose, fit)
+SUBCOMMANDS = (run, replay, simulate, demo, identify, diagnose, fit, report)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,26 @@
+"""``gyrostand report RUN``: one HTML page with PNG plots of the current model; prints its
+path."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from .workbench_args import add_subject_args, subject_of
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("report", help="write an HTML report with plots of the current model",
+                       description=__doc__)
+    add_subject_args(p)
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="folder of the report (default: report-<gyro>/ in the run folder, or "
+                        "beside the CSV)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..report import write_report  # matplotlib only when a report is asked for
+
+    print(write_report(subject_of(args), args.out))
+    return 0
