@@ -33,7 +33,7 @@ from .data import Samples
 from .kalman import foh_weights, kf_step
 from .model import Model
 from .results import Estimate, FitResult
-from .validate import require_samples
+from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
 
@@ -239,6 +239,7 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     given = dict(held or {})
     if sigma is not None:
         given["markov.sigma"] = float(sigma)
+    samples = prepare(samples, "lkf")
     require_samples(samples, samples.n_observed, len(layout) + 2, "lkf")
     warnings = list(samples.warnings)
     hv, src = held_values(samples, model, given)
@@ -268,9 +269,10 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     first_point = dict(zip(keys, map(float, x0), strict=True))
     x1, sd, run = one_pass(x0)
     settled = not iterate
+    clipped = [0]  # passes whose beta came out <= 0 and was re-linearised at beta0/3
     if iterate:
         x0, x1, sd, run, settled = _fixed_point(one_pass, lambda: state["passes"], x0, x1,
-                                                sd, run, max_iter, tol, warnings)
+                                                sd, run, max_iter, tol, clipped)
         if not settled:
             warnings.append(f"lkf: iteration did not settle within {max_iter} passes")
     point = dict(zip(keys, map(float, x0), strict=True))
@@ -291,12 +293,13 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
         source=samples.source, n_samples=len(samples), n_observed=samples.n_observed,
         dt=samples.dt, covariance=run["P"][np.ix_(idx, idx)], cov_names=tuple(names),
         info={"linearization": point, "passes": state["passes"], "iterated": iterate,
-              "settled": settled, "held_from": src, "first_point": first_point},
+              "settled": settled, "held_from": src, "first_point": first_point,
+              "beta_clipped_passes": clipped[0]},
         history=run["history"],
     )
 
 
-def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, warnings):
+def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped):
     """Re-linearise until the estimate equals the linearisation point: x = g(x).
 
     Plain re-linearisation converges linearly (slowly along the γ/β ridge); every step is
@@ -307,8 +310,8 @@ def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, warnings):
 
     def fix_beta(x_new, x_old):
         x_new = x_new.copy()
-        if x_new[0] <= 0:
-            warnings.append("lkf: a pass gave beta <= 0; re-linearised at beta0/3")
+        if x_new[0] <= 0:  # typical of the first passes from the paper's 1e-4 point
+            clipped[0] += 1
             x_new[0] = x_old[0] / 3
         x_new[0] = min(max(x_new[0], x_old[0] / 10), x_old[0] * 10)
         return x_new

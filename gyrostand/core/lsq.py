@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import IdentificationError, ModelError
-from .data import Samples
+from .data import MIN_TEMP_SPAN, Samples
 from .model import Model
 from .results import Estimate, FitResult
-from .validate import require_samples
+from .validate import prepare, require_samples
 
 SUPPORTED = {"markov", "temp", "bias", "white"}
 
@@ -124,7 +124,8 @@ def rows(model: Model, dt: float, y_prev: np.ndarray, y_cur: np.ndarray, T_cur: 
 
 
 def solve(st: LsqStats, model: Model, dt: float, sigma: float | None,
-          warnings: list[str]) -> tuple[dict[str, Estimate], np.ndarray, np.ndarray, float]:
+          warnings: list[str], temp_constant: bool = False
+          ) -> tuple[dict[str, Estimate], np.ndarray, np.ndarray, float]:
     """Estimates from the statistics: ``(params, X, cov, s2)``."""
     names = regressor_names(model)
     p = len(names)
@@ -133,7 +134,7 @@ def solve(st: LsqStats, model: Model, dt: float, sigma: float | None,
         raise IdentificationError(
             "lsq: the regressors are collinear "
             + ("(the temperature is constant, so temp.gamma and bias.b cannot be told apart)"
-               if "temp" in model and "bias" in model else "(the data do not vary enough)")
+               if "temp" in model and "bias" in model and temp_constant else "(the data do not vary enough)")
         )
     X = np.linalg.solve(st.HtH, st.Htd)
     rss = max(st.dd - 2 * float(X @ st.Htd) + float(X @ st.HtH @ X), 0.0)
@@ -199,6 +200,7 @@ def lsq(samples: Samples, model: Model, *, regressor: str = "previous",
     """
     check_lsq_model(model)
     check_regressor(regressor)
+    samples = prepare(samples, "lsq")
     warnings = list(samples.warnings)
     dt = samples.dt
     y, T = samples.drift, samples.temp
@@ -209,7 +211,8 @@ def lsq(samples: Samples, model: Model, *, regressor: str = "previous",
     st = LsqStats(len(names))
     st.add_rows(H, d, np.flatnonzero(np.diff(idx) == 1) + 1)
     st.add_y(y[np.isfinite(y)])
-    params, X, cov, s2 = solve(st, model, dt, sigma, warnings)
+    params, X, cov, s2 = solve(st, model, dt, sigma, warnings,
+                               temp_constant=samples.temp_span < MIN_TEMP_SPAN)
     residuals = np.full(samples.t.size, np.nan)
     residuals[idx] = d - H @ X
     return FitResult(

@@ -35,7 +35,7 @@ from .data import Samples
 from .kalman import kf_run
 from .model import LOG_2PI, Model, context
 from .results import Estimate, FitResult
-from .validate import require_samples
+from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
 
@@ -307,6 +307,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     fixed = dict(fixed or {})
     if sigma is not None:
         fixed["markov.sigma"] = float(sigma)
+    samples = prepare(samples, "ml")
     prob = _Problem(model, samples, fixed)
     n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
     require_samples(samples, samples.n_observed, n_free + 2, "ml")
