@@ -32,7 +32,8 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -111,10 +112,10 @@ class RunOutcome:
         return self.state != "fault"
 
 
-def _quantile(xs: list[float], q: float) -> float:
-    if not xs:
-        return math.nan
+def _quantile(xs: Iterable[float], q: float) -> float:
     s = sorted(xs)
+    if not s:
+        return math.nan
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
@@ -160,10 +161,9 @@ class Pipeline:
         self._last_beat_wall = wall()
         self._beats = 0
         self._rounds = 0
-        self._last_end = -math.inf
         self.commands: dict[str, int] = {"received": 0, "acked": 0, "nacked": 0,
                                          "ignored": 0}
-        self.step_ms: list[float] = []
+        self.step_ms: deque[float] = deque(maxlen=86_400)  # worker ms per step with bins
         self._logged_bad: tuple[int, ...] = (0, 0, 0, 0)
         self._logged_t = -math.inf
         self._period, self._beat = r.period, r.heartbeat
@@ -175,7 +175,6 @@ class Pipeline:
             t_start = time.perf_counter()
             self._bins(bins)
             end = max(b.t for b in bins) + self.cfg.sampling.dt
-            self._last_end = max(self._last_end, end)
             if end >= self._next_result:
                 self._next_result = (math.floor(end / self._period) + 1) * self._period
                 self.send_results()
