@@ -9,7 +9,7 @@ unit per (s·degC), noise levels in the drift unit (deg/h with our DBC).
 LKF (:class:`~gyrostand.core.lkf.OnlineLKF`): linearised at the session's ``lkf`` point with
 the noise levels held (``markov.sigma``, ``white.sigma``, ...). Whatever the config leaves
 out is taken from a *warm-up* fit of the first ``lkf.warmup`` observed bins (least squares
-for the point where the model allows it, else ML; the core's held-value estimate for the
+for the point where the model allows it and finds β > 0, else ML; the core's held-value estimate for the
 noise levels), after which the filter starts at the first bin and catches up over the
 warm-up bins, so its estimate still uses every bin. Until then its status is
 ``insufficient_data``.
@@ -78,7 +78,8 @@ class LkfPoint:
 
 def resolve_lkf_point(model: Model, cfg: LkfConfig, samples: Samples | None) -> LkfPoint:
     """Fill what ``cfg`` leaves out from a fit of ``samples`` (the warm-up, or the whole
-    record in the final fit). Raises :class:`GyrostandError` when the data cannot give it
+    record in the final fit): least squares, or ML where LSQ cannot represent the model or
+    finds no mean reversion (β ≤ 0). Raises :class:`GyrostandError` when the data cannot give it
     (too few bins, collinear regressors, a non-positive β)."""
     given: dict[str, float] = dict(cfg.held)
     if cfg.sigma is not None:
@@ -96,18 +97,20 @@ def resolve_lkf_point(model: Model, cfg: LkfConfig, samples: Samples | None) -> 
         if need_point:
             try:
                 fit = identify(samples, model, "lsq")
+                if not fit.value("markov.beta") > 0:  # no mean reversion seen by lsq
+                    raise GyrostandError("lsq beta <= 0")
             except GyrostandError:
                 fit = identify(samples, model, "ml", std_errors=False)
             for k in need_point:
                 point[k] = fit.value(k)
-            source = f"warm-up {fit.method} on {samples.n_observed} bins"
+            source = f"{fit.method} fit of {samples.n_observed} bins"
         if need_held:
             hv, src = held_values(samples, model, given)
             given.update(hv)
             source += f"; noise from {src}" if need_point else f"noise from {src}"
     beta0 = float(point["markov.beta"] or 0.0)
     if not beta0 > 0:
-        raise GyrostandError(f"lkf: warm-up beta = {beta0:.3g} is not > 0")
+        raise GyrostandError(f"lkf: linearisation point beta0 = {beta0:.3g} is not > 0")
     held = {n: float(given[n]) for n in held_names(model)}
     if held.get("markov.sigma", 1.0) <= 0:
         raise GyrostandError("lkf: markov.sigma must be > 0")
