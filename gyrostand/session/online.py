@@ -9,9 +9,9 @@ unit per (s·degC), noise levels in the drift unit (deg/h with our DBC).
 LKF (:class:`~gyrostand.core.lkf.OnlineLKF`): linearised at the session's ``lkf`` point with
 the noise levels held (``markov.sigma``, ``white.sigma``, ...). Whatever the config leaves
 out is taken from a *warm-up* fit of the first ``lkf.warmup`` observed bins (least squares
-for the point where the model allows it and finds β > 0, else ML; the core's held-value estimate for the
-noise levels), after which the filter starts at the first bin and catches up over the
-warm-up bins, so its estimate still uses every bin. Until then its status is
+for the point where the model allows it and finds β > 0, else ML; the core's held-value
+estimate for the noise levels), after which the filter starts at the first bin and catches
+up over the warm-up bins, so its estimate still uses every bin. Until then its status is
 ``insufficient_data``.
 
 LSQ (:class:`~gyrostand.core.lsq.OnlineLSQ`): sufficient statistics updated per bin, solved

@@ -1,0 +1,47 @@
+"""The per-gyro ``lkf`` section of a session file: values, warm-up defaults, key-path errors."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+from sessionhelpers import DEMO, demo_dict
+
+from gyrostand.config import LkfConfig, parse_config
+from gyrostand.errors import ConfigError
+from gyrostand.session.online import GyroTracker
+
+
+def _cfg(lkf):
+    d = copy.deepcopy(demo_dict())
+    d["gyros"][0]["lkf"] = lkf
+    return parse_config(d, source="t.yaml", base_dir=DEMO.parent)
+
+
+def test_lkf_section_values_and_defaults():
+    g = _cfg({"beta0": 0.03, "gamma0": -0.001, "sigma": 0.1, "white_sigma": 0.0,
+              "b0": "auto", "warmup": 120, "iterate": True}).gyros[0]
+    assert g.lkf == LkfConfig(0.03, -0.001, None, 0.1, 0.0, {}, 120, True)
+    assert g.lkf.needs_warmup  # b0 left to the data
+    assert parse_config(demo_dict(), "t.yaml", DEMO.parent).gyros[0].lkf == LkfConfig()
+    # everything given: the online LKF starts at the first bin, no warm-up
+    full = _cfg({"beta0": 0.03, "gamma0": -0.001, "b0": 0.0, "sigma": 0.1,
+                 "white_sigma": 0.01}).gyros[0]
+    tr = GyroTracker(full, 1.0)
+    tr.update(0.5, 20.0)
+    (lkf, lsq) = tr.estimates()
+    assert lkf.status == "ok" and lkf.values["white.sigma"] == (0.01, 0.0)
+    assert lsq.status == "insufficient_data"
+
+
+@pytest.mark.parametrize("lkf, match", [
+    ({"beta0": 0}, r"t\.yaml: gyros\[0\]\.lkf\.beta0: must be > 0"),
+    ({"sigma": -1}, r"gyros\[0\]\.lkf\.sigma: must be >= 0"),
+    ({"gamma": 1}, r"gyros\[0\]\.lkf\.gamma: unknown key"),
+    ({"held": {"random_walk.q": 1}}, r"gyros\[0\]\.lkf\.held\.random_walk\.q: expected"),
+    ({"warmup": 5}, r"gyros\[0\]\.lkf\.warmup: must be in \[10, "),
+    ({"iterate": "yes"}, r"gyros\[0\]\.lkf\.iterate: expected true or false"),
+])
+def test_lkf_section_errors_name_the_key(lkf, match):
+    with pytest.raises(ConfigError, match=match):
+        _cfg(lkf)
