@@ -46,6 +46,8 @@ log = logging.getLogger(__name__)
 
 #: identifiers that run online (per bin); the others only in the final fit
 ONLINE = ("lkf", "lsq")
+#: the LKF warm-up gives up after this many times ``lkf.warmup`` bins (bounded memory)
+MAX_WARMUP_FACTOR = 20
 NAN = math.nan
 
 
@@ -161,7 +163,15 @@ class _LkfTrack:
         if self.filter is not None:
             self._feed(y, T)
             return
+        if self.failed:
+            return
         self.buffered.append((y, T))
+        if len(self.buffered) > MAX_WARMUP_FACTOR * self.cfg.warmup:
+            self.failed = (f"no usable warm-up within {len(self.buffered)} bins; give "
+                           "lkf.beta0, gamma0, b0, sigma, white_sigma in the session file")
+            log.warning("lkf: %s", self.failed)
+            self.buffered = []  # gave up (until a reset)
+            return
         if self.observed < self.next_try:
             return
         self.next_try = self.observed + max(10, self.cfg.warmup // 5)
@@ -181,7 +191,7 @@ class _LkfTrack:
         names = self.model.param_names
         if self.filter is None or self.filter.k == 0:
             note = self.failed or f"warm-up: {self.observed} of {self.cfg.warmup} bins"
-            return OnlineEstimate("lkf", "insufficient_data",
+            return OnlineEstimate("lkf", "failed" if self.failed else "insufficient_data",
                                   {n: (NAN, NAN) for n in names}, self.observed, NAN, note)
         est = self.filter.estimates
         assert self.point is not None

@@ -45,3 +45,14 @@ def test_lkf_section_values_and_defaults():
 def test_lkf_section_errors_name_the_key(lkf, match):
     with pytest.raises(ConfigError, match=match):
         _cfg(lkf)
+
+
+def test_lkf_warm_up_gives_up_with_bounded_memory():
+    g = _cfg({"warmup": 10}).gyros[0]
+    tr = GyroTracker(g, 1.0)
+    for _ in range(250):  # a constant drift at a constant temperature: nothing to fit
+        tr.update(0.5, 20.0)
+    lkf = tr.estimates()[0]
+    assert lkf.status == "failed" and "no usable warm-up within 201 bins" in lkf.note
+    tr.reset()
+    assert tr.estimates()[0].status == "insufficient_data"
