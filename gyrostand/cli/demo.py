@@ -1,7 +1,8 @@
 """``gyrostand demo``: the stand simulator and the daemon in one process on python-can's
 ``virtual`` bus (``configs/demo.yaml``): the paper's 2000-s scenario sent as fast as the
 machine allows (frame timestamps still advance as on a real stand), then a stop command;
-prints the final table and the paths of result.json and the report."""
+prints the final table, the paths of result.json and the report, and writes the
+workbench's HTML report of each gyro."""
 
 from __future__ import annotations
 
@@ -68,4 +69,12 @@ def run(args: argparse.Namespace) -> int:
           f"{sim.duration or sim.temperature[-1][0]:g} s of frame time; stop "
           + ("acknowledged" if ack and ack.get("Result") == 0 else "not acknowledged"))
     print_outcome(outcome, sys.stdout, truths)
+    if outcome.ok:
+        # the workbench's page on the run: model vs measurements, residuals, candidates
+        from ..report import write_report
+        from ..workbench import open_subject
+
+        for f in outcome.finals:
+            page = write_report(open_subject(outcome.run_dir, gyro=f.gyro))
+            print(f"html report ({f.gyro}): {page}")
     return 0 if outcome.ok else 1
