@@ -31,3 +31,8 @@ class ConfigError(GyrostandError, ValueError):
 
 class CanEdgeError(GyrostandError, RuntimeError):
     """A failure at the CAN edge (bus, DBC, log file), wrapping python-can / cantools errors."""
+
+
+class OutputError(GyrostandError, OSError):
+    """A file of a run that cannot be written (disk full, no permission, not a folder);
+    the message names the path."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,6 +32,8 @@ from .core.results import FitResult
 from .errors import DataError, GyrostandError
 
 DEFAULT_MODEL = "markov,temp,bias"
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -54,12 +57,17 @@ def read_ledger(path: Path) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     out = []
-    for i, line in enumerate(path.read_text().splitlines(), start=1):
+    text = path.read_text()
+    lines = text.split("\n")
+    for i, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
             out.append(json.loads(line))
         except json.JSONDecodeError as exc:
+            if i == len(lines):  # no line end: a step torn while being appended
+                log.warning("%s: line %d: torn last entry left out", path, i)
+                break
             raise DataError(f"{path}: line {i}: not a JSON ledger entry ({exc.msg})") from None
     return out
 

@@ -22,13 +22,18 @@ from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
 from gyrostand.errors import CanEdgeError
 
-__all__ = ["read_log", "paced", "replay"]
+__all__ = ["read_log", "read_logs", "paced", "replay"]
 
 log = logging.getLogger(__name__)
 
 
 def read_log(path: str | Path) -> Iterator[can.Message]:
-    """Frames of a log file, in file order. Raises :class:`CanEdgeError` naming the file."""
+    """Frames of a log file, in file order. Raises :class:`CanEdgeError` naming the file.
+
+    A BLF whose last object is torn (the recording process was killed while appending, or
+    the disk filled up) is read up to the tear, with a warning: python-can's reader
+    raises there, after the last complete frame. Damage anywhere else is an error.
+    """
     path = Path(path)
     if not path.is_file():
         raise CanEdgeError(f"{path}: log file not found")
@@ -40,9 +45,23 @@ def read_log(path: str | Path) -> Iterator[can.Message]:
     try:
         yield from reader
     except Exception as exc:
-        raise CanEdgeError(f"{path}: corrupt CAN log: {exc}") from exc
+        f = getattr(reader, "file", None)
+        try:
+            at_end = f is not None and not f.closed and f.tell() >= path.stat().st_size
+        except (OSError, ValueError):
+            at_end = False
+        if not (at_end and path.suffix.lower() == ".blf"):
+            raise CanEdgeError(f"{path}: corrupt CAN log: {exc}") from exc
+        log.warning("%s: torn last object ignored (the recording stopped while writing "
+                    "it): %s", path, exc or type(exc).__name__)
     finally:
         reader.stop()
+
+
+def read_logs(paths: Iterable[str | Path]) -> Iterator[can.Message]:
+    """The frames of several logs (e.g. a resumed run's segments), one after the other."""
+    for p in paths:
+        yield from read_log(p)
 
 
 def paced(messages: Iterable[can.Message], speed: float = 1.0,

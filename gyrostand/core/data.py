@@ -159,9 +159,13 @@ class Samples:
         """Read a CSV with a header containing ``t``, ``drift`` and ``temp`` columns.
 
         Extra columns (e.g. ``n_drift``) are ignored. Empty or ``nan`` cells in drift/temp
-        are gaps; anything else unparsable is an error naming the file and line.
+        are gaps; anything else unparsable is an error naming the file and line. A last
+        line without its line end and with fewer cells than the header is torn (a writer
+        stopped mid-line, e.g. a daemon killed while appending): it is left out, with a
+        warning.
         """
         path = Path(path)
+        torn = _torn_last_line(path)
         try:
             fh = path.open(newline="")
         except OSError as exc:
@@ -181,7 +185,11 @@ class Samples:
             cols = [names.index(c) for c in REQUIRED_COLUMNS]
             rows: list[tuple[float, float, float]] = []
             lines: list[int] = []
-            for lineno, row in enumerate(reader, start=2):
+            body = list(reader)
+            torn = torn and bool(body) and len(body[-1]) < len(names)
+            if torn:
+                body.pop()
+            for lineno, row in enumerate(body, start=2):
                 if not row or all(not c.strip() for c in row):
                     continue
                 vals = []
@@ -203,8 +211,13 @@ class Samples:
         if not rows:
             raise DataError(f"{path}: no data rows after the header")
         arr = np.array(rows)
-        return cls.from_arrays(arr[:, 0], arr[:, 1], arr[:, 2], dt=dt, source=str(path),
-                               lines=np.array(lines))
+        s = cls.from_arrays(arr[:, 0], arr[:, 1], arr[:, 2], dt=dt, source=str(path),
+                            lines=np.array(lines))
+        if torn:
+            note = f"{path}: torn last line (no line end) left out"
+            s = cls(t=s.t, drift=s.drift, temp=s.temp, dt=s.dt, source=s.source,
+                    warnings=(*s.warnings, note))
+        return s
 
     def to_csv(self, path: str | Path) -> None:
         """Write ``t, drift, temp`` (gaps as empty drift cells) to ``path``."""
@@ -214,3 +227,16 @@ class Samples:
             for a, b, c in zip(self.t, self.drift, self.temp, strict=True):
                 w.writerow((repr(float(a)), "" if math.isnan(b) else repr(float(b)),
                             repr(float(c))))
+
+
+def _torn_last_line(path: Path) -> bool:
+    """True when the file is not empty and does not end with a line end."""
+    try:
+        with path.open("rb") as fh:
+            fh.seek(0, 2)
+            if fh.tell() == 0:
+                return False
+            fh.seek(-1, 2)
+            return fh.read(1) not in (b"\n", b"\r")
+    except OSError:
+        return False

@@ -134,7 +134,10 @@ def read_estimates(path: Path, t0: float | None = None) -> list[Convergence]:
     Parameters whose std is never positive (held values) are left out (listed in ``held``).
     """
     with path.open(newline="", encoding="utf-8") as fh:
-        rows = list(csv.reader(fh))
+        text = fh.read()
+    # a last line without its line end is torn (the run was killed while appending it)
+    rows = list(csv.reader(text.split("\n")[:-1] if not text.endswith("\n") else
+                           text.splitlines()))
     if not rows or not rows[0] or rows[0][0] != "t":
         raise DataError(f"{path}: not an estimates file (the header must start with t)")
     header, body = rows[0], [r for r in rows[1:] if len(r) == len(rows[0])]
