@@ -124,9 +124,11 @@ def render(n_gyros: int = N_GYROS) -> str:
         ' SG_ FramesRejected m1 : 40|24@1+ (1,0) [0|16777215] "" STAND\n'
         ' SG_ BusErrors m2 : 8|24@1+ (1,0) [0|16777215] "" STAND\n'
         ' SG_ LateFrames m2 : 32|24@1+ (1,0) [0|16777215] "" STAND\n'
+        ' SG_ Outages m2 : 56|8@1+ (1,0) [0|255] "" STAND\n'
     )
     cm.append(f'CM_ BO_ {STATUS_ID} "Heartbeat, 1 Hz: pages 0, 1, 2 sent back to back with '
               'the same Counter. Counts are cumulative since start and wrap.";')
+    cm.append(f'CM_ SG_ {STATUS_ID} Outages "Bus outages survived (reconnected); wraps.";')
     val.append(f'VAL_ {STATUS_ID} State 0 "idle" 1 "running" 2 "stopping" 3 "stopped" '
                '4 "fault" ;')
     bo.append(
@@ -143,13 +145,13 @@ def render(n_gyros: int = N_GYROS) -> str:
         ' SG_ Command : 0|8@1+ (1,0) [0|255] "" STAND\n'
         ' SG_ Sequence : 8|8@1+ (1,0) [0|255] "" STAND\n'
         ' SG_ Result : 16|8@1+ (1,0) [0|1] "" STAND\n'
-        ' SG_ Reason : 24|8@1+ (1,0) [0|5] "" STAND\n'
+        ' SG_ Reason : 24|8@1+ (1,0) [0|6] "" STAND\n'
         ' SG_ Node : 32|8@1+ (1,0) [0|255] "" STAND\n'
     )
     cm.append(f'CM_ BO_ {ACK_ID} "Acknowledgement of GS_COMMAND (echoes Command, Sequence).";')
     val.append(f'VAL_ {ACK_ID} Result 0 "ack" 1 "nack" ;')
     val.append(f'VAL_ {ACK_ID} Reason 0 "ok" 1 "unknown_command" 2 "wrong_state" 3 "busy" '
-               '4 "malformed" 5 "not_for_me" ;')
+               '4 "malformed" 5 "not_for_me" 6 "rate_limited" ;')
     return (HEADER + "\n".join(bo) + "\n\n" + "\n".join(cm) + "\n\n" + "\n".join(val)
             + "\n\n" + "\n".join(vt) + "\n")
 

@@ -18,15 +18,14 @@ timestamp cannot emit millions of gap rows.
 
 from __future__ import annotations
 
-import csv
 import logging
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
-from gyrostand.errors import DataError
+from gyrostand.errors import DataError, OutputError
 
 __all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS"]
 
@@ -86,7 +85,25 @@ class Binner:
         self.t0: float | None = None if epoch is None else float(epoch)
         self.max_gap_bins = max(1, int(max_gap / dt))
         self._open: list[_Open | None] = [None] * len(self.gyros)
+        self._floor: list[int | None] = [None] * len(self.gyros)
+        self._rebase = [False] * len(self.gyros)
         self._bins = self._gaps = self._late = self._jumps = 0
+
+    def resume_after(self, t0: float, last_k: dict[str, int]) -> None:
+        """Continue a series already written (a resumed run): ``t0`` the grid origin (s),
+        ``last_k[gyro]`` the index of its last written bin. A later sample of that gyro at
+        or before that bin is late; the first one after it emits the bins in between as
+        gaps (when no more than ``max_gap`` apart; else the series jumps)."""
+        self.t0 = float(t0)
+        for g, name in enumerate(self.gyros):
+            if name in last_k and self._open[g] is None:
+                self._floor[g] = int(last_k[name])
+
+    def rebase(self) -> None:
+        """After a bus outage: the next sample of each gyro may jump forward further than
+        ``max_gap`` (the bins up to the jump are closed, the series continues after it;
+        a shorter outage shows as gap bins as usual)."""
+        self._rebase = [True] * len(self.gyros)
 
     def _close(self, g: int, b: _Open) -> Bin:
         d = b.s0 / b.n0 if b.n0 else math.nan
@@ -104,18 +121,32 @@ class Binner:
         k = math.floor((t - self.t0) / self.dt)
         b = self._open[g]
         if b is None:
+            fl = self._floor[g]
+            if fl is not None:  # resumed: continue after the last written bin
+                if k <= fl:
+                    self._late += 1
+                    return
+                self._floor[g] = None
+                if k - fl - 1 <= self.max_gap_bins:
+                    for kk in range(fl + 1, k):
+                        out.append(self._close(g, _Open(kk)))
             b = self._open[g] = _Open(k)
         elif k != b.k:
             if k < b.k:
                 self._late += 1
                 return
             if k - b.k > self.max_gap_bins:
-                self._jumps += 1
-                return
-            out.append(self._close(g, b))
-            for kk in range(b.k + 1, k):
-                out.append(self._close(g, _Open(kk)))
-            b = self._open[g] = _Open(k)
+                if not self._rebase[g]:
+                    self._jumps += 1
+                    return
+                out.append(self._close(g, b))  # after an outage: the series jumps
+                b = self._open[g] = _Open(k)
+            else:
+                out.append(self._close(g, b))
+                for kk in range(b.k + 1, k):
+                    out.append(self._close(g, _Open(kk)))
+                b = self._open[g] = _Open(k)
+            self._rebase[g] = False
         if channel == 0:
             b.s0 += value
             b.n0 += 1
@@ -162,32 +193,71 @@ class Binner:
 class SamplesWriter:
     """Write each gyro's bins to ``<run_dir>/<gyro>/samples.csv`` with columns
     ``t, drift, temp, n_drift, n_temp`` (t = bin start, s; NaN written as ``nan``; floats
-    in Python's shortest round-trip form, so a file read back gives the same floats)."""
+    in Python's shortest round-trip form, so a file read back gives the same floats).
 
-    def __init__(self, run_dir: str | Path, gyros: Sequence[str]) -> None:
+    Rows are held in memory until :meth:`flush` (or until ``max_pending`` rows wait), which
+    first calls ``before_flush`` (the live daemon passes the raw recorder's flush) and then
+    writes every file. So a row reaches the disk only after every frame it was binned
+    from: a row on disk is *acknowledged*, and the raw log replays to it. ``append``
+    continues existing files (a resumed run) instead of starting them over.
+    """
+
+    def __init__(self, run_dir: str | Path, gyros: Sequence[str], *,
+                 before_flush: Callable[[], None] | None = None, max_pending: int = 4096,
+                 append: bool = False) -> None:
         self.paths: dict[str, Path] = {}
         self._files: dict[str, TextIO] = {}
-        self._writers = {}
+        self._pending: dict[str, list[str]] = {}
+        self.before_flush = before_flush
+        self.max_pending = int(max_pending)
+        self._n_pending = 0
+        self.rows = 0  # rows written to disk by this writer
         for name in gyros:
             path = Path(run_dir) / name / "samples.csv"
             path.parent.mkdir(parents=True, exist_ok=True)
-            f = path.open("w", newline="", encoding="utf-8")
-            w = csv.writer(f, lineterminator="\n")
-            w.writerow(SAMPLES_COLUMNS)
-            self.paths[name], self._files[name], self._writers[name] = path, f, w
+            fresh = not (append and path.is_file() and path.stat().st_size > 0)
+            f = path.open("w" if fresh else "a", newline="", encoding="utf-8")
+            if fresh:
+                f.write(",".join(SAMPLES_COLUMNS) + "\n")
+                f.flush()
+            self.paths[name], self._files[name], self._pending[name] = path, f, []
 
     def write(self, bins: Iterable[Bin]) -> None:
         for b in bins:
-            self._writers[b.gyro].writerow(
-                (repr(b.t), repr(b.drift), repr(b.temp), b.n_drift, b.n_temp))
+            self._pending[b.gyro].append(
+                f"{b.t!r},{b.drift!r},{b.temp!r},{b.n_drift},{b.n_temp}\n")
+            self._n_pending += 1
+        if self._n_pending >= self.max_pending:
+            self.flush()
 
     def flush(self) -> None:
-        for f in self._files.values():
-            f.flush()
+        """``before_flush()``, then every pending row to disk (one write per file).
+        Raises :class:`~gyrostand.errors.OutputError` naming the file that failed."""
+        if self.before_flush is not None:
+            self.before_flush()
+        for name, rows in self._pending.items():
+            if not rows:
+                continue
+            f = self._files[name]
+            try:
+                f.write("".join(rows))
+                f.flush()
+            except OSError as exc:
+                raise OutputError(f"{self.paths[name]}: cannot write: "
+                                  f"{exc.strerror or exc}") from exc
+            self.rows += len(rows)
+            rows.clear()
+        self._n_pending = 0
 
     def close(self) -> None:
-        for f in self._files.values():
-            f.close()
+        try:
+            self.flush()
+        finally:
+            for f in self._files.values():
+                try:
+                    f.close()
+                except OSError:  # the unwritable tail is lost; flush() said so
+                    pass
 
     def __enter__(self) -> SamplesWriter:
         return self
@@ -197,10 +267,22 @@ class SamplesWriter:
 
 
 def read_samples_csv(path: str | Path) -> dict[str, list[float]]:
-    """Read a ``samples.csv`` back as columns of floats (counts as floats too)."""
+    """Read a ``samples.csv`` back as columns of floats (counts as floats too).
+
+    A last line without its line end is torn (the writer was killed or the disk filled
+    mid-line): it is left out with a warning."""
     with Path(path).open(newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
+        text = f.read()
+    lines = text.split("\n")
+    if lines[-1]:
+        log.warning("%s: torn last line left out: %r", path, lines[-1][:80])
+    rows = [r.split(",") for r in lines[:-1]]
+    if not rows:
+        raise DataError(f"{path}: empty file (expected the header {','.join(SAMPLES_COLUMNS)})")
     header, body = rows[0], rows[1:]
     if tuple(header) != SAMPLES_COLUMNS:
         raise DataError(f"{path}: unexpected columns {header}")
-    return {name: [float(r[i]) for r in body] for i, name in enumerate(header)}
+    try:
+        return {name: [float(r[i]) for r in body] for i, name in enumerate(header)}
+    except (ValueError, IndexError) as exc:
+        raise DataError(f"{path}: not a samples file ({exc})") from None

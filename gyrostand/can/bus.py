@@ -42,7 +42,7 @@ STATE_CODES = {"idle": 0, "running": 1, "stopping": 2, "stopped": 3, "fault": 4}
 STATUS_CODES = {"ok": 0, "warning": 1, "not_converged": 2, "failed": 3,
                 "insufficient_data": 4}
 ACK_REASONS = {"ok": 0, "unknown_command": 1, "wrong_state": 2, "busy": 3, "malformed": 4,
-               "not_for_me": 5}
+               "not_for_me": 5, "rate_limited": 6}
 COMMANDS = {1: "start", 2: "stop", 3: "reset", 4: "snapshot"}
 
 
@@ -176,8 +176,9 @@ class FrameEncoder:
 
     def status_frames(self, ref: str | MessageRef, state: str, counter: int, *, bins: int,
                       gaps: int, decoded: int, rejected: int, bus_errors: int, late: int,
-                      timestamp: float = 0.0) -> list[can.Message]:
-        """The heartbeat: pages 0, 1, 2 with one Counter; counts wrap (see README)."""
+                      outages: int = 0, timestamp: float = 0.0) -> list[can.Message]:
+        """The heartbeat: pages 0, 1, 2 with one Counter; counts wrap (see README).
+        ``outages`` goes into page 2's ``Outages`` where the DBC has that signal."""
         msg = self._message(ref)
         s = {x.name: x for x in msg.signals}
         c = counter % 16
@@ -187,7 +188,8 @@ class FrameEncoder:
             {"Page": 1, "FramesDecoded": _wrap(decoded, s["FramesDecoded"]),
              "FramesRejected": _wrap(rejected, s["FramesRejected"])},
             {"Page": 2, "BusErrors": _wrap(bus_errors, s["BusErrors"]),
-             "LateFrames": _wrap(late, s["LateFrames"])},
+             "LateFrames": _wrap(late, s["LateFrames"]),
+             **({"Outages": _wrap(outages, s["Outages"])} if "Outages" in s else {})},
         )
         return [self.encode(ref, {"Counter": c, **p}, timestamp=timestamp) for p in pages]
 

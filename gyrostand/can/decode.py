@@ -26,7 +26,7 @@ from cantools.database.can import Database
 from gyrostand.can.dbc import MessageRef, SignalRef, frame_key
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
-           "Sample", "Command"]
+           "Sample", "Command", "MALFORMED"]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,8 @@ _NEG_INF = -math.inf
 
 Sample = tuple[int, int, float, float]
 Command = tuple[float, dict[str, float]]
+#: key of a queued command frame that could not be decoded (value: index in REASONS)
+MALFORMED = "__malformed__"
 
 
 @dataclass(frozen=True)
@@ -130,6 +132,7 @@ class DecodingListener(can.Listener):
         self._known = {frame_key(m.frame_id, bool(m.is_extended_frame)) for m in db.messages}
         self._last_counter: dict[tuple[int, int], int] = {}
         self._last_t = -math.inf
+        self._resynced = False
         for g, pair in enumerate(channels.signals):
             for c, ref in enumerate(pair):
                 route = self._route(db, ref.message)
@@ -150,6 +153,16 @@ class DecodingListener(can.Listener):
             msg = db.get_message_by_name(ref.name)
             self._routes[ref.key] = _Route(msg, msg.length)
         return self._routes[ref.key]
+
+    def resync(self) -> None:
+        """After a bus outage: forget each frame id's last timestamp, so the first frame
+        after the outage is neither a ``time_jump`` nor ``non_monotonic`` (the binner
+        decides what a jump means for the series). Counters are kept."""
+        with self._lock:
+            for r in self._routes.values():
+                r.last_t = -math.inf
+            self._resynced = True
+            self._last_counter.clear()
 
     def reset_counters(self) -> None:
         """Zero every counter (the FIFO and timestamp history are kept)."""
@@ -192,6 +205,8 @@ class DecodingListener(can.Listener):
         data = msg.data
         if len(data) != route.length:
             self._reject("wrong_dlc")
+            if route.is_command:
+                self._malformed_command(route, msg, "wrong_dlc")
             return
         t = msg.timestamp
         if not _isfinite(t):
@@ -200,7 +215,10 @@ class DecodingListener(can.Listener):
         if t < route.last_t:
             self._reject("non_monotonic")
             return
-        ref_t = route.last_t if route.last_t > _NEG_INF else self._last_t
+        if route.last_t > _NEG_INF:
+            ref_t = route.last_t
+        else:  # first frame of this id (since a resync: no reference at all)
+            ref_t = _NEG_INF if self._resynced else self._last_t
         if ref_t > _NEG_INF and t - ref_t > self.max_gap:
             self._reject("time_jump")
             return
@@ -208,6 +226,8 @@ class DecodingListener(can.Listener):
             values = route.decode(data, False)
         except Exception:
             self._reject("undecodable")
+            if route.is_command:
+                self._malformed_command(route, msg, "undecodable")
             return
         if route.is_command:
             if len(self._commands) >= self._command_capacity:
@@ -280,6 +300,22 @@ class DecodingListener(can.Listener):
         self._buf.extend(out)
         n[1] += 1
         n[3] += len(out)
+
+    def _malformed_command(self, route: _Route, msg: can.Message, why: str) -> None:
+        """A frame of the command id that cannot be a command (already counted as
+        rejected): queue it marked ``MALFORMED`` so the daemon answers with a nack, with
+        whatever signals the bytes present still give (to echo Command and Sequence)."""
+        if len(self._commands) >= self._command_capacity:
+            self._reject("overflow")
+            return
+        try:
+            values = dict(route.message.decode(bytes(msg.data), decode_choices=False,
+                                               allow_truncated=True, allow_excess=True))
+        except Exception:
+            values = {}
+        values[MALFORMED] = float(REASONS.index(why))
+        t = msg.timestamp if _isfinite(msg.timestamp) else self._last_t
+        self._commands.append((t, values))
 
     def on_error(self, exc: Exception) -> None:
         """Called by the Notifier when the bus (or a listener) raised: count and log; the

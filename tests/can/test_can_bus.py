@@ -54,7 +54,7 @@ def test_status_ack_command_and_saturation(demo_cfg):
     dec = [st.decode(p.data, decode_choices=False) for p in pages]
     assert dec[0] == {"Page": 0, "Counter": 1, "State": 1, "Bins": 5, "Gaps": 3}
     assert dec[1] == {"Page": 1, "Counter": 1, "FramesDecoded": 123456, "FramesRejected": 7}
-    assert dec[2] == {"Page": 2, "Counter": 1, "BusErrors": 1, "LateFrames": 2}
+    assert dec[2] == {"Page": 2, "Counter": 1, "BusErrors": 1, "LateFrames": 2, "Outages": 0}
     ack = enc.ack_frame("GS_ACK", command=2, sequence=9, ok=False, reason="wrong_state", node=3)
     assert db.get_message_by_name("GS_ACK").decode(ack.data, decode_choices=False) == \
         {"Command": 2, "Sequence": 9, "Result": 1, "Reason": 2, "Node": 3}
