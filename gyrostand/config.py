@@ -50,6 +50,7 @@ __all__ = [
     "GyroConfig",
     "SamplingConfig",
     "ResponsesConfig",
+    "ReconnectConfig",
     "SimGyroConfig",
     "SimulateConfig",
     "SessionConfig",
@@ -158,6 +159,19 @@ class ResponsesConfig:
     ack: MessageRef | None = None
     command: MessageRef | None = None
     node: int = 1
+    command_rate: float = 10.0
+
+
+@dataclass(frozen=True)
+class ReconnectConfig:
+    """What the daemon does when the bus goes away (e.g. a ``remote`` server stops):
+    retry opening it, waiting ``first_delay`` s, then twice as long each time up to
+    ``max_delay`` s; after ``max_time`` s without a bus it stops in state ``fault``
+    (0: at once)."""
+
+    max_time: float = 600.0
+    first_delay: float = 0.25
+    max_delay: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -204,6 +218,7 @@ class SessionConfig:
     responses: ResponsesConfig
     simulate: SimulateConfig | None = None
     db: Any = field(default=None, repr=False, compare=False)
+    reconnect: ReconnectConfig = field(default_factory=ReconnectConfig)
 
     def gyro(self, name: str) -> GyroConfig:
         for g in self.gyros:
@@ -323,7 +338,7 @@ class _Parser:
     # -- sections --------------------------------------------------------------------
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
-                           ("sampling", "responses", "simulate"))
+                           ("sampling", "responses", "simulate", "reconnect"))
         sess = self.mapping(top["session"], "session", ("name",), ("output",))
         name = self.string(sess["name"], "session.name")
         if not _NAME_RE.match(name):
@@ -356,11 +371,21 @@ class _Parser:
         simulate = None
         if top.get("simulate") is not None:
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
+        reconnect = self.reconnect(top.get("reconnect") or {})
         return SessionConfig(
             path=Path(self.source), name=name, output=output,
             bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
+            reconnect=reconnect,
         )
+
+    def reconnect(self, value: Any) -> ReconnectConfig:
+        m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay"))
+        max_time = self.number(m.get("max_time", 600.0), "reconnect.max_time", lo=0.0)
+        first = self.number(m.get("first_delay", 0.25), "reconnect.first_delay", lo=0.0,
+                            lo_open=True)
+        most = self.number(m.get("max_delay", 10.0), "reconnect.max_delay", lo=first)
+        return ReconnectConfig(max_time, first, most)
 
     def sampling(self, value: Any) -> SamplingConfig:
         m = self.mapping(value, "sampling", (), ("dt", "epoch", "buffer", "max_gap"))
@@ -452,7 +477,8 @@ class _Parser:
 
     def responses(self, value: Any) -> ResponsesConfig:
         m = self.mapping(value, "responses", (),
-                         ("period", "heartbeat", "status", "ack", "command", "node"))
+                         ("period", "heartbeat", "status", "ack", "command", "node",
+                          "command_rate"))
         period = self.number(m.get("period", 10.0), "responses.period", lo=0.0, lo_open=True)
         beat = self.number(m.get("heartbeat", 1.0), "responses.heartbeat", lo=0.0,
                            lo_open=True)
@@ -464,7 +490,10 @@ class _Parser:
                 refs[key] = self.message(m[key], f"responses.{key}")
                 self.require_signals(refs[key], f"responses.{key}", needed)  # type: ignore[arg-type]
         node = self.integer(m.get("node", 1), "responses.node", 0, 254)
-        return ResponsesConfig(period, beat, refs["status"], refs["ack"], refs["command"], node)
+        rate = self.number(m.get("command_rate", 10.0), "responses.command_rate", lo=0.0,
+                           lo_open=True)
+        return ResponsesConfig(period, beat, refs["status"], refs["ack"], refs["command"], node,
+                               rate)
 
     def simulate(self, value: Any, gyro_names: list[str]) -> SimulateConfig:
         p = "simulate"

@@ -19,5 +19,7 @@ def print_outcome(outcome: RunOutcome, out: TextIO,
         print(f"\ngyro {f.gyro}: {f.bins} bins, {f.gaps} gaps", file=out)
         print(result_table(f, (truths or {}).get(f.gyro)), file=out)
     print(f"\nrun folder: {outcome.run_dir}", file=out)
-    print(f"result:     {outcome.result_json}", file=out)
-    print(f"report:     {outcome.report}", file=out)
+    for label, path in (("result:    ", outcome.result_json), ("report:    ", outcome.report)):
+        print(f"{label} {path}" if path.is_file() else f"{label} not written", file=out)
+    for err in outcome.stats.get("unwritten", []):
+        print(f"error: {err}", file=out)

@@ -1,13 +1,17 @@
-"""``gyrostand replay CONFIG LOG [--out DIR] [--realtime] [--speed X]``."""
+"""``gyrostand replay CONFIG LOG [LOG ...] [--out DIR] [--realtime] [--speed X]``; a LOG
+that is a run folder stands for its raw segments (``raw.blf``, ``raw-2.blf``, ...)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from ..config import load_config
+from ..errors import CanEdgeError
 from ..session.offline import run_replay
+from ..session.outputs import raw_segments
 from .common import print_outcome
 
 
@@ -18,7 +22,9 @@ def add_parser(sub: Any) -> None:
                     "it) through the same pipeline as a live run; all timing from frame "
                     "timestamps; as fast as possible unless --realtime.")
     p.add_argument("config", help="YAML session file")
-    p.add_argument("log", help="recorded CAN log, e.g. a run's raw.blf")
+    p.add_argument("log", nargs="+",
+                   help="recorded CAN log(s), replayed one after the other, e.g. a run's "
+                        "raw.blf; a run folder stands for all its raw segments in order")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="parent folder of the run folder (default: session.output)")
     p.add_argument("--realtime", action="store_true", help="pace frames to their timestamps")
@@ -28,7 +34,17 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
-    outcome = run_replay(cfg, args.log, out=args.out, realtime=args.realtime,
-                         speed=args.speed)
+    logs: list[Path] = []
+    for item in args.log:
+        p = Path(item)
+        if p.is_dir():
+            segs = raw_segments(p)
+            if not segs:
+                raise CanEdgeError(f"{p}: no raw log (raw.blf) in this folder")
+            logs += segs
+        else:
+            logs.append(p)
+    outcome = run_replay(cfg, logs[0] if len(logs) == 1 else logs, out=args.out,
+                         realtime=args.realtime, speed=args.speed)
     print_outcome(outcome, sys.stdout)
     return 0

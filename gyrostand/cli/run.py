@@ -1,4 +1,5 @@
-"""``gyrostand run CONFIG [--duration S] [--out DIR] [--idle]``: the live daemon."""
+"""``gyrostand run CONFIG [--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the
+live daemon."""
 
 from __future__ import annotations
 
@@ -27,6 +28,11 @@ def add_parser(sub: Any) -> None:
                         "session.output)")
     p.add_argument("--idle", action="store_true",
                    help="bin and record, but identify only after a start command")
+    p.add_argument("--resume", nargs="?", const=True, default=None, metavar="RUN_DIR",
+                   help="continue a run folder (after a crash or a stop): RUN_DIR, or the "
+                        "session's newest run folder under --out / session.output; bins "
+                        "are appended after the last one written, the raw log continues "
+                        "in raw-2.blf, raw-3.blf, ...")
     p.set_defaults(func=run)
 
 
@@ -37,6 +43,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"ready: {run_dir}", flush=True)
 
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
-                       on_ready=ready)
+                       on_ready=ready, resume=args.resume)
     print_outcome(outcome, sys.stdout)
     return 0 if outcome.ok else 1

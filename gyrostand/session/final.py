@@ -36,8 +36,10 @@ from ..core.model import Model
 from ..core.results import UNIT_TEXT, FitResult
 from ..errors import GyrostandError
 from .online import LkfPoint, OnlineEstimate, resolve_lkf_point
+from .outputs import write_atomic
 
-__all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods"]
+__all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods",
+           "write_provisional_result"]
 
 log = logging.getLogger(__name__)
 
@@ -122,9 +124,22 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
 def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
                       finals: Sequence[GyroFinal], stats: Mapping[str, Any]) -> None:
     doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
-           "run_dir": str(run_dir), "dt": cfg.sampling.dt,
+           "run_dir": str(run_dir), "dt": cfg.sampling.dt, "state": "finished",
            "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
-    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+
+
+def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
+                             run_dir: Path) -> None:
+    """``result.json`` while the run is going (``"state": "running"``, no fits yet), so a
+    running or crashed run folder is already a run folder for ``diagnose`` / ``report``;
+    the final one replaces it (both written atomically)."""
+    doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
+           "run_dir": str(run_dir), "dt": cfg.sampling.dt, "state": "running",
+           "gyros": {g.name: {"model": list(g.model), "t0": None, "bins": 0, "gaps": 0,
+                              "observed": 0, "fits": {}, "online": {}} for g in cfg.gyros},
+           "stats": {"stop_reason": None}}
+    write_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
 def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
@@ -182,7 +197,7 @@ def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[G
                       f"{f.gaps} gaps, {f.observed} observed", ""]
         lines.append(result_table(f, truths.get(f.gyro)))
     lines += ["", "(y = the drift's unit, e.g. deg/h; ± one standard deviation)"]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_atomic(path, "\n".join(lines) + "\n")
 
 
 def _finite(x: float) -> float | None:

@@ -12,7 +12,7 @@ binned too.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import can
@@ -20,7 +20,7 @@ import numpy as np
 
 from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
-from ..can.replay import replay
+from ..can.replay import read_logs, replay
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
@@ -34,18 +34,28 @@ __all__ = ["run_replay", "simulated_truths", "simulated_frames", "truth_params"]
 log = logging.getLogger(__name__)
 
 
-def run_replay(cfg: SessionConfig, log_path: str | Path | Iterable[can.Message], *, out: str | Path | None = None,
-               realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
+def run_replay(cfg: SessionConfig,
+               log_path: str | Path | Sequence[str | Path] | Iterable[can.Message], *,
+               out: str | Path | None = None, realtime: bool = False, speed: float = 1.0,
+               pump_every: int = 1024,
                truths: dict[str, dict[str, float]] | None = None) -> RunOutcome:
-    """Replay ``log_path`` (any format python-can reads, or frames) through the pipeline,
-    as fast as possible unless ``realtime`` (paced to frame time / ``speed``)."""
-    what = str(log_path) if isinstance(log_path, str | Path) else "<frames>"
+    """Replay ``log_path`` (any format python-can reads; a list of such files, read one
+    after the other, e.g. the raw segments of a resumed run; or frames) through the
+    pipeline, as fast as possible unless ``realtime`` (paced to frame time / ``speed``)."""
+    source: Iterable[can.Message] | str | Path
+    if isinstance(log_path, list | tuple) and all(isinstance(p, str | Path)
+                                                  for p in log_path):
+        what = " + ".join(str(p) for p in log_path)
+        source = read_logs(log_path)
+    else:
+        what = str(log_path) if isinstance(log_path, str | Path) else "<frames>"
+        source = log_path  # type: ignore[assignment]
     run_dir = make_run_dir(out or cfg.output, cfg.name)
     runlog = RunLog(run_dir)
     try:
         pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}")
         log.info("replaying %s into %s", what, run_dir)
-        for bins in replay(log_path, pipe.ingest, realtime=realtime, speed=speed,
+        for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
                            pump_every=pump_every):
             pipe.step(bins)
         pipe.step([])

@@ -4,6 +4,7 @@
 
     <output>/<session name>-<UTC yyyymmdd-HHMMSS>/
         raw.blf              every raw frame received (live runs; replayable)
+        raw-2.blf, ...       the raw log of each resumed segment (``run --resume``)
         <gyro>/samples.csv   1-s bins: t, drift, temp, n_drift, n_temp
         <gyro>/estimates.csv online estimates after every bin, with stds
         result.json          final batch fits per gyro + counts
@@ -12,6 +13,12 @@
 
 The folder name uses the wall clock (it names a file, it is not data); a suffix ``-2``,
 ``-3``, ... keeps two runs started in the same second apart.
+
+Files that are rewritten (``result.json``, ``report.txt``, ``snapshot.json``) are written
+to a temporary file beside them and renamed into place (:func:`write_atomic`), so a reader
+sees the old or the new file, never half of one. Files that grow (``samples.csv``,
+``estimates.csv``, ``run.log``, ``ledger.jsonl``) are appended line by line; a reader
+leaves out a torn last line (no line end).
 """
 
 from __future__ import annotations
@@ -19,14 +26,18 @@ from __future__ import annotations
 import csv
 import logging
 import math
+import os
+import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
+from ..errors import OutputError
 from .online import OnlineEstimate
 
-__all__ = ["make_run_dir", "RunLog", "EstimatesWriter", "estimate_columns"]
+__all__ = ["make_run_dir", "RunLog", "EstimatesWriter", "estimate_columns", "write_atomic",
+           "raw_segments", "next_raw_segment", "latest_run_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +52,83 @@ def make_run_dir(output: str | Path, name: str, wall: float | None = None) -> Pa
             path.mkdir(parents=True)
             return path
         except FileExistsError:
+            if not Path(output).is_dir():  # a file where the output folder should be
+                raise OutputError(f"{output}: cannot create the run folder there: not a "
+                                  "folder") from None
             n += 1
             path = base.with_name(f"{base.name}-{n}")
+        except OSError as exc:
+            raise OutputError(f"{path}: cannot create the run folder: "
+                              f"{exc.strerror or exc}") from exc
+
+
+def check_writable(run_dir: Path) -> None:
+    """Fail early, naming the folder, when files cannot be created in ``run_dir``."""
+    probe = run_dir / f".write-probe-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise OutputError(f"{run_dir}: cannot write in the run folder: "
+                          f"{exc.strerror or exc}") from exc
+
+
+_RUN_RE = re.compile(r"^(?P<stamp>\d{8}-\d{6})(?:-(?P<n>\d+))?$")
+
+
+def latest_run_dir(output: str | Path, name: str) -> Path:
+    """The newest ``<output>/<name>-<stamp>[-n]`` folder (by its UTC stamp, then n)."""
+    found: list[tuple[str, int, Path]] = []
+    out = Path(output)
+    if out.is_dir():
+        for p in out.iterdir():
+            if p.is_dir() and p.name.startswith(f"{name}-"):
+                m = _RUN_RE.match(p.name[len(name) + 1:])
+                if m:
+                    found.append((m["stamp"], int(m["n"] or 1), p))
+    if not found:
+        raise OutputError(f"{out}: no run folder of session {name!r} to resume")
+    return max(found)[2]
+
+
+_SEG_RE = re.compile(r"^raw(?:-(\d+))?\.blf$")
+
+
+def raw_segments(run_dir: Path) -> list[Path]:
+    """The run's raw logs in recording order: ``raw.blf``, ``raw-2.blf``, ..."""
+    segs = []
+    for p in Path(run_dir).iterdir():
+        m = _SEG_RE.match(p.name)
+        if m and p.is_file():
+            segs.append((int(m[1] or 1), p))
+    return [p for _, p in sorted(segs)]
+
+
+def next_raw_segment(run_dir: Path) -> Path:
+    """The file the next raw segment goes to (``raw.blf`` for a new run)."""
+    segs = raw_segments(run_dir)
+    if not segs:
+        return run_dir / "raw.blf"
+    m = _SEG_RE.match(segs[-1].name)
+    n = int(m[1] or 1) if m else len(segs)
+    return run_dir / f"raw-{n + 1}.blf"
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path``, then rename it over ``path``.
+    Raises :class:`OutputError` naming ``path`` (the old file, if any, is left intact)."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with tmp.open("w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
 
 
 class RunLog:
@@ -83,13 +169,15 @@ class EstimatesWriter:
     online estimates after that bin (NaN written ``nan`` while unknown)."""
 
     def __init__(self, path: Path, identifiers: Sequence[str],
-                 param_names: Sequence[str]) -> None:
+                 param_names: Sequence[str], *, append: bool = False) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
         self.param_names = tuple(param_names)
-        self._f: TextIO = path.open("w", newline="", encoding="utf-8")
+        fresh = not (append and path.is_file() and path.stat().st_size > 0)
+        self._f: TextIO = path.open("w" if fresh else "a", newline="", encoding="utf-8")
         self._w = csv.writer(self._f, lineterminator="\n")
-        self._w.writerow(estimate_columns(identifiers, param_names))
+        if fresh:
+            self._w.writerow(estimate_columns(identifiers, param_names))
 
     def write(self, t: float, estimates: Sequence[OnlineEstimate]) -> None:
         row: list[object] = [repr(t)]
@@ -98,13 +186,25 @@ class EstimatesWriter:
                 v, s = e.values[p]
                 row += [_num(v), _num(s)]
             row.append(e.status)
-        self._w.writerow(row)
+        try:
+            self._w.writerow(row)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
     def flush(self) -> None:
-        self._f.flush()
+        try:
+            self._f.flush()
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
     def close(self) -> None:
-        self._f.close()
+        try:
+            self.flush()
+        finally:
+            try:
+                self._f.close()
+            except OSError:
+                pass
 
 
 def _num(x: float) -> str:

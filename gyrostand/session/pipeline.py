@@ -23,7 +23,13 @@ Commands (``GS_COMMAND``, only from the configured message; ``Target`` must be t
 ``stop`` (ends the run: the driver stops reading), ``reset`` (online identifiers restart
 at the next bin; bins and files are kept), ``snapshot`` (flush files, write
 ``snapshot.json`` with the current online estimates and send a result round now). Unknown
-codes are nacked ``unknown_command``, frames without Command/Sequence ``malformed``.
+codes are nacked ``unknown_command``; frames of the command id with a wrong length, that
+cannot be decoded, or without Command/Sequence are nacked ``malformed`` (echoing what
+can be read). At most ``responses.command_rate`` commands per second of frame time are
+handled (a token bucket holding ``max(1, rate)``); the excess is nacked ``rate_limited``,
+and those nacks are themselves limited to the same rate (beyond it they are only counted,
+``nacks_suppressed``), so a flood of commands cannot make the daemon flood the bus. Every
+outcome is counted in ``stats()["commands"]``.
 """
 
 from __future__ import annotations
@@ -42,13 +48,20 @@ import can
 
 from ..can.binning import Bin, Binner, SamplesWriter, read_samples_csv
 from ..can.bus import COMMANDS, FrameEncoder
-from ..can.decode import ChannelMap, DecodingListener
+from ..can.decode import MALFORMED, REASONS, ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
-from ..errors import GyrostandError
-from .final import GyroFinal, fit_gyro, write_report, write_result_json
+from ..errors import GyrostandError, OutputError
+from .final import (
+    GyroFinal,
+    fit_gyro,
+    write_provisional_result,
+    write_report,
+    write_result_json,
+)
 from .online import GyroTracker, OnlineEstimate
-from .outputs import EstimatesWriter
+from .outputs import EstimatesWriter, write_atomic
+from .resume import ResumeState
 
 __all__ = ["Pipeline", "FrameSink", "NullSink", "BusSink", "RunOutcome"]
 
@@ -67,6 +80,7 @@ class NullSink:
 
     sent: int = 0
     errors: int = 0
+    offline: int = 0
 
     def send(self, frames: Sequence[can.Message]) -> None:
         self.sent += len(frames)
@@ -77,13 +91,17 @@ class BusSink:
     """Send on a bus; a failed send is counted and logged, never raised (a full transmit
     queue must not stop the daemon)."""
 
-    bus: can.BusABC
+    bus: can.BusABC | None
     timeout: float = 0.05
     sent: int = 0
     errors: int = 0
+    offline: int = 0  # frames not sent because the bus was gone (an outage)
     log_every: int = 100
 
     def send(self, frames: Sequence[can.Message]) -> None:
+        if self.bus is None:
+            self.offline += len(frames)
+            return
         for f in frames:
             try:
                 self.bus.send(f, timeout=self.timeout)
@@ -112,6 +130,26 @@ class RunOutcome:
         return self.state != "fault"
 
 
+class TokenBucket:
+    """At most ``rate`` events per second of frame time, bursts up to ``max(1, rate)``."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate = float(rate)
+        self.capacity = max(1.0, self.rate)
+        self.tokens = self.capacity
+        self.t = -math.inf
+
+    def take(self, t: float) -> bool:
+        if math.isfinite(t):
+            if self.t > -math.inf and t > self.t:
+                self.tokens = min(self.capacity, self.tokens + (t - self.t) * self.rate)
+            self.t = max(self.t, t)
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+
 def _quantile(xs: Iterable[float], q: float) -> float:
     s = sorted(xs)
     if not s:
@@ -133,7 +171,9 @@ class Pipeline:
 
     def __init__(self, cfg: SessionConfig, run_dir: Path, sink: FrameSink, *,
                  source: str = "live", start_idle: bool = False,
-                 wall: Callable[[], float] = time.time) -> None:
+                 wall: Callable[[], float] = time.time,
+                 before_flush: Callable[[], None] | None = None,
+                 resume: ResumeState | None = None) -> None:
         self.cfg, self.run_dir, self.sink, self.source, self.wall = cfg, run_dir, sink, \
             source, wall
         self.channels = ChannelMap.from_config(cfg)
@@ -145,12 +185,19 @@ class Pipeline:
         self.ingest = Ingest(self.listener, self.binner)
         self.encoder = FrameEncoder(cfg.db)
         self.trackers = {g.name: GyroTracker(g, cfg.sampling.dt) for g in cfg.gyros}
-        self.samples = SamplesWriter(run_dir, self.channels.gyros)
+        self.samples = SamplesWriter(run_dir, self.channels.gyros, before_flush=before_flush,
+                                     append=resume is not None)
         self.estimates = {
             g.name: EstimatesWriter(run_dir / g.name / "estimates.csv",
                                     self.trackers[g.name].identifiers,
-                                    self.trackers[g.name].model.param_names)
+                                    self.trackers[g.name].model.param_names,
+                                    append=resume is not None)
             for g in cfg.gyros}
+        self.outages = 0
+        self.resumed: dict[str, Any] = {}
+        write_provisional_result(run_dir / "result.json", cfg, source, run_dir)
+        if resume is not None:
+            self._resume(resume)
         self.state = "idle" if start_idle else "running"
         self.stop_requested: str | None = None
         r = cfg.responses
@@ -159,14 +206,40 @@ class Pipeline:
         self._beat_frame_t = -math.inf
         self._last_beat_ts = -math.inf
         self._last_beat_wall = wall()
+        self._tick_t, self._tick_wall = -math.inf, self._last_beat_wall
         self._beats = 0
         self._rounds = 0
-        self.commands: dict[str, int] = {"received": 0, "acked": 0, "nacked": 0,
-                                         "ignored": 0}
+        self.commands: dict[str, int] = {
+            "received": 0, "acked": 0, "nacked": 0, "ignored": 0, "malformed": 0,
+            "unknown": 0, "rate_limited": 0, "nacks_suppressed": 0}
+        self._cmd_bucket = TokenBucket(r.command_rate)
+        self._nack_bucket = TokenBucket(r.command_rate)
         self.step_ms: deque[float] = deque(maxlen=86_400)  # worker ms per step with bins
         self._logged_bad: tuple[int, ...] = (0, 0, 0, 0)
         self._logged_t = -math.inf
         self._period, self._beat = r.period, r.heartbeat
+
+    def _resume(self, st: ResumeState) -> None:
+        """Continue the kept bins: grid, online identifiers fed again, missing estimate
+        rows written (see :mod:`~gyrostand.session.resume`)."""
+        if st.t0 is not None:
+            self.binner.resume_after(st.t0, st.last_k(self.cfg.sampling.dt))
+        for name, cols in st.columns.items():
+            tr, until = self.trackers[name], st.estimates_until.get(name, -math.inf)
+            for t, d, tm in zip(cols["t"], cols["drift"], cols["temp"], strict=True):
+                tr.update(d, tm)
+                if t > until:
+                    self.estimates[name].write(t, tr.estimates())
+            self.resumed[name] = len(cols["t"])
+        self.flush_files()
+        log.info("resumed with %s kept bins per gyro", self.resumed)
+
+    def flush_files(self) -> None:
+        """Acknowledge: the raw log (``before_flush``), then the pending bins, then the
+        estimates, to disk. Raises :class:`~gyrostand.errors.OutputError`."""
+        self.samples.flush()
+        for w in self.estimates.values():
+            w.flush()
 
     # -- per step ----------------------------------------------------------------------
     def step(self, bins: Sequence[Bin]) -> None:
@@ -195,17 +268,21 @@ class Pipeline:
 
     def wall_tick(self) -> None:
         """Live only: keep the heartbeat going while no new frame has arrived since the
-        last beat; flush the files. Such a beat is stamped with the last beat's timestamp
-        plus the wall time elapsed since (so beat timestamps keep increasing in frame
-        time), or with the wall clock before the first frame."""
+        last beat, or frame time has not moved for a heartbeat period of wall time (the
+        frames stopped between two beats); flush the files. Such a beat is stamped with
+        the last beat's timestamp plus the wall time elapsed since (at least the newest
+        frame time, so beat timestamps keep increasing in frame time), or with the wall
+        clock before the first frame."""
         now = self.wall()
+        t = self.listener.last_timestamp
+        if t != self._tick_t:  # frame time moved since the last tick
+            self._tick_t, self._tick_wall = t, now
         elapsed = now - self._last_beat_wall
-        if elapsed >= self._beat and self.listener.last_timestamp <= self._beat_frame_t:
-            framed = math.isfinite(self.listener.last_timestamp)
-            self.heartbeat(self._last_beat_ts + elapsed if framed else now)
-        self.samples.flush()
-        for w in self.estimates.values():
-            w.flush()
+        silent = now - self._tick_wall >= self._beat  # frames stopped (maybe mid-period)
+        if elapsed >= self._beat and (t <= self._beat_frame_t or silent):
+            framed = math.isfinite(t)
+            self.heartbeat(max(self._last_beat_ts + elapsed, t) if framed else now)
+        self.flush_files()
 
     # -- frames out --------------------------------------------------------------------
     def frame_time(self) -> float:
@@ -227,7 +304,7 @@ class Pipeline:
         self.sink.send(self.encoder.status_frames(
             ref, self.state, self._beats - 1, bins=b.bins, gaps=b.gaps, decoded=d.decoded,
             rejected=d.rejected_total, bus_errors=d.bus_errors, late=b.late,
-            timestamp=timestamp))
+            outages=self.outages, timestamp=timestamp))
 
     def _log_rejections(self, d: Any, b: Any, t: float, force: bool = False) -> None:
         """Log what was rejected/lost since the last such line (at most every 10 s of
@@ -290,14 +367,30 @@ class Pipeline:
                      self.cfg.responses.node)
             return
         code, seq = values.get("Command"), values.get("Sequence")
-        if code is None or seq is None:
-            log.warning("malformed command at t=%.3f: %s", t, values)
-            self._ack(int(code or 0), int(seq or 0), False, "malformed")
+        c, q = int(code or 0), int(seq or 0)
+        if not self._cmd_bucket.take(t):
+            self.commands["rate_limited"] += 1
+            if self.commands["rate_limited"] % 100 == 1:
+                log.warning("commands over responses.command_rate = %g/s: %d refused so far",
+                            self.cfg.responses.command_rate, self.commands["rate_limited"])
+            if self._nack_bucket.take(t):
+                self._ack(c, q, False, "rate_limited")
+            else:
+                self.commands["nacks_suppressed"] += 1
             return
-        code, seq = int(code), int(seq)
+        if MALFORMED in values or code is None or seq is None:
+            self.commands["malformed"] += 1
+            why = REASONS[int(values[MALFORMED])] if MALFORMED in values else \
+                "no Command/Sequence"
+            log.warning("malformed command at t=%.3f (%s): %s", t, why,
+                        {k: v for k, v in values.items() if k != MALFORMED})
+            self._ack(c, q, False, "malformed")
+            return
+        code, seq = c, q
         name = COMMANDS.get(code)
         log.info("command %s (seq %d) at t=%.3f", name or code, seq, t)
         if name is None:
+            self.commands["unknown"] += 1
             self._ack(code, seq, False, "unknown_command")
         elif name == "start":
             if self.state != "idle":
@@ -322,16 +415,14 @@ class Pipeline:
 
     def snapshot(self, t: float) -> Path:
         """Flush the files and write ``snapshot.json`` (current online estimates)."""
-        self.samples.flush()
-        for w in self.estimates.values():
-            w.flush()
+        self.flush_files()
         doc = {"t": t, "gyros": {
             name: {e.identifier: {"status": e.status, "samples": e.samples, "note": e.note,
                                   "parameters": {k: {"value": _j(v), "std": _j(s)}
                                                  for k, (v, s) in e.values.items()}}
                    for e in tr.estimates()} for name, tr in self.trackers.items()}}
         path = self.run_dir / "snapshot.json"
-        path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
         self.send_results()
         log.info("snapshot written to %s", path)
         return path
@@ -345,8 +436,10 @@ class Pipeline:
             "decoder": dec, "binner": asdict(self.binner.stats()),
             "responses": {"result_rounds": self._rounds, "heartbeats": self._beats,
                           "frames_sent": getattr(self.sink, "sent", 0),
-                          "send_errors": getattr(self.sink, "errors", 0)},
+                          "send_errors": getattr(self.sink, "errors", 0),
+                          "not_sent_offline": getattr(self.sink, "offline", 0)},
             "commands": dict(self.commands),
+            "samples": {"rows_written": self.samples.rows, "resumed_bins": dict(self.resumed)},
             "timing": {"bin_steps": len(self.step_ms),
                        "step_ms_median": _quantile(self.step_ms, 0.5),
                        "step_ms_p99": _quantile(self.step_ms, 0.99)},
@@ -359,9 +452,18 @@ class Pipeline:
         last result round (with the final ML) and a last heartbeat. Call after the driver
         has delivered the last bins (its flush)."""
         self.state = "stopping" if state != "fault" else state
-        self.samples.close()
+        unwritten: list[str] = []
+
+        def attempt(write: Callable[[], None]) -> None:
+            try:
+                write()
+            except OutputError as exc:  # e.g. the disk is full: say so, finish the rest
+                unwritten.append(str(exc))
+                log.error("%s", exc)
+
+        attempt(self.samples.close)
         for w in self.estimates.values():
-            w.close()
+            attempt(w.close)
         finals: list[GyroFinal] = []
         extra: dict[str, list[OnlineEstimate]] = {}
         for g in self.cfg.gyros:
@@ -376,6 +478,8 @@ class Pipeline:
                 extra[g.name] = [OnlineEstimate("ml", "warning" if ml.warnings else "ok",
                                                 vals, ml.n_observed, ml.residual_rms)]
         self.send_results(extra)
+        if unwritten and state != "fault":
+            state, reason = "fault", f"{reason}; {unwritten[0]}"
         self.state = state
         self.heartbeat(max(self.frame_time(), self._last_beat_ts))
         self._log_rejections(self.listener.stats(), self.binner.stats(), self.frame_time(),
@@ -384,9 +488,15 @@ class Pipeline:
         stats.update(extra_stats or {})
         stats["stop_reason"] = reason
         result = self.run_dir / "result.json"
-        write_result_json(result, self.cfg, self.source, self.run_dir, finals, stats)
         report = self.run_dir / "report.txt"
-        write_report(report, self.cfg, self.source, finals, stats, truths or {})
+        stats["unwritten"] = unwritten
+        attempt(lambda: write_result_json(result, self.cfg, self.source, self.run_dir,
+                                          finals, stats))
+        attempt(lambda: write_report(report, self.cfg, self.source, finals, stats,
+                                     truths or {}))
+        if unwritten and state != "fault":
+            state, reason = "fault", f"{reason}; {unwritten[0]}"
+            stats["stop_reason"] = reason
         log.info("run finished (%s): %s, %s", reason, result, report)
         return RunOutcome(self.run_dir, result, report, finals, reason, state, stats)
 

@@ -88,7 +88,8 @@ def test_commands_are_acked_or_refused_with_a_reason(bad_run):
                     6: (3, 0, 0),    # reset: ok (5 was for node 7: ignored)
                     1: (2, 0, 0)}    # stop
     assert outcome.stats["commands"] == {"received": 6, "acked": 3, "nacked": 2,
-                                         "ignored": 1}
+                                         "ignored": 1, "malformed": 0, "unknown": 1,
+                                         "rate_limited": 0, "nacks_suppressed": 0}
     snap = json.loads((outcome.run_dir / "snapshot.json").read_text())
     assert snap["gyros"]["az"]["lsq"]["status"] in ("ok", "warning")
     # after the reset the online identifiers start over: the last rows say so

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import can
 import pytest
+import yaml
 from sessionhelpers import ROOT, decode, write_cfg_yaml
 
 from gyrostand.can.bus import FrameEncoder
@@ -183,6 +184,9 @@ def test_run_process_ends_with_fault_when_the_bus_dies(tmp_path):
         _wait_port(port)
         bus = {"interface": "remote", "channel": f"ws://127.0.0.1:{port}/"}
         cfg_path = write_cfg_yaml(tmp_path / "dies.yaml", tmp_path / "runs", bus)
+        d = yaml.safe_load(cfg_path.read_text())
+        d["reconnect"] = {"max_time": 1.0, "first_delay": 0.1}  # retry 1 s, then fault
+        cfg_path.write_text(yaml.safe_dump(d))
         daemon = Daemon(cfg_path, tmp_path / "runs")
         ready = daemon.wait_for("ready: ")
     finally:
@@ -194,4 +198,6 @@ def test_run_process_ends_with_fault_when_the_bus_dies(tmp_path):
                for line in daemon.out), daemon.out
     doc = json.loads((Path(ready.split(": ", 1)[1]) / "result.json").read_text())
     assert doc["stats"]["stop_reason"].startswith("bus failure")
+    assert "no bus after" in doc["stats"]["stop_reason"]
+    assert doc["stats"]["bus"]["outages"] == 1
     assert all("error" in f for f in doc["gyros"]["az"]["fits"].values())  # no bins

@@ -1,0 +1,146 @@
+"""Continuing a run folder after a crash or a stop (``gyrostand run --resume``).
+
+What a resumed run keeps: every *acknowledged* 1-s sample (a row of ``<gyro>/samples.csv``
+on disk; the daemon writes a row only after the raw log holds every frame it was binned
+from, see :class:`~gyrostand.can.binning.SamplesWriter`), the online estimates of those
+bins (``estimates.csv``), the ledger, ``run.log`` (appended) and the earlier raw segments.
+What it does:
+
+* a torn last line of ``samples.csv`` / ``estimates.csv`` (no line end: the process died
+  while appending it) is cut off; estimate rows of bins that never reached
+  ``samples.csv`` are cut off too, so both files end at the same bin;
+* the online identifiers are rebuilt by feeding them the kept bins again (estimate rows
+  missing for kept bins are written then);
+* binning continues on the same grid after each gyro's last kept bin: bins until the
+  first new frame are gaps (n = 0; at most ``sampling.max_gap`` of them, a longer pause
+  shows as a jump of ``t``), older frames are late;
+* the raw log continues in a new segment, ``raw-2.blf``, ``raw-3.blf``, ...
+  (:func:`~gyrostand.session.outputs.raw_segments`); ``gyrostand replay CONFIG RUN_DIR``
+  replays them in order.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..can.binning import read_samples_csv
+from ..config import SessionConfig
+from ..errors import OutputError
+from .outputs import latest_run_dir, next_raw_segment
+
+__all__ = ["ResumeState", "prepare_resume", "find_resume_dir"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ResumeState:
+    """What a resumed pipeline continues from: per gyro the kept bins' columns (as
+    :func:`read_samples_csv` gives them) and the ``t`` of its last estimates row; the grid
+    origin ``t0`` (s) and the raw segment to record into."""
+
+    run_dir: Path
+    segment: Path
+    t0: float | None
+    columns: dict[str, dict[str, list[float]]] = field(default_factory=dict)
+    estimates_until: dict[str, float] = field(default_factory=dict)
+
+    def last_k(self, dt: float) -> dict[str, int]:
+        """Index on the grid of each gyro's last kept bin."""
+        if self.t0 is None:
+            return {}
+        return {g: round((c["t"][-1] - self.t0) / dt) for g, c in self.columns.items()
+                if c["t"]}
+
+
+def find_resume_dir(cfg: SessionConfig, where: str | Path | None,
+                    out: str | Path | None = None) -> Path:
+    """``where`` if given (a run folder), else the newest run folder of the session under
+    ``out`` (default ``session.output``)."""
+    if where:
+        p = Path(where)
+        if not p.is_dir():
+            raise OutputError(f"{p}: no such run folder to resume")
+        return p
+    return latest_run_dir(out or cfg.output, cfg.name)
+
+
+def _cut_torn_tail(path: Path) -> int:
+    """Cut a last line without line end; return the bytes removed."""
+    size = path.stat().st_size
+    if size == 0:
+        return 0
+    with path.open("rb+") as fh:
+        fh.seek(-1, os.SEEK_END)
+        if fh.read(1) == b"\n":
+            return 0
+        back = min(size, 1 << 16)
+        fh.seek(size - back)
+        tail = fh.read(back)
+        keep = size - back + tail.rfind(b"\n") + 1 if b"\n" in tail else 0
+        fh.truncate(keep)
+    log.warning("%s: cut a torn last line (%d bytes)", path, size - keep)
+    return size - keep
+
+
+def _cut_estimates_after(path: Path, t_last: float | None) -> float | None:
+    """Cut estimate rows of bins after ``t_last`` (None: keep only the header); return the
+    t of the last row kept (None when none)."""
+    with path.open("rb") as fh:
+        lines = fh.read().split(b"\n")
+    body = lines[1:-1] if lines and lines[-1] == b"" else lines[1:]
+    keep, last = len(lines[0]) + 1, None
+    for ln in body:
+        try:
+            t = float(ln.split(b",", 1)[0])
+        except ValueError:
+            break
+        if t_last is None or t > t_last:
+            break
+        keep += len(ln) + 1
+        last = t
+    if keep < path.stat().st_size:
+        with path.open("rb+") as fh:
+            fh.truncate(keep)
+        log.warning("%s: cut estimate rows after the last kept bin", path)
+    return last
+
+
+def prepare_resume(cfg: SessionConfig, run_dir: Path) -> ResumeState:
+    """Check and repair the run folder's growing files; return what to continue from."""
+    if not any((run_dir / g.name / "samples.csv").is_file() for g in cfg.gyros):
+        raise OutputError(f"{run_dir}: not a run folder of session {cfg.name!r} (no "
+                          f"<gyro>/samples.csv of gyros {', '.join(g.name for g in cfg.gyros)})")
+    state = ResumeState(run_dir, next_raw_segment(run_dir), None)
+    firsts: list[float] = []
+    for g in cfg.gyros:
+        sp = run_dir / g.name / "samples.csv"
+        if not sp.is_file():
+            continue
+        try:
+            _cut_torn_tail(sp)
+            if sp.stat().st_size == 0:  # even the header was torn: start the file over
+                continue
+            cols = read_samples_csv(sp)
+        except OSError as exc:
+            raise OutputError(f"{sp}: cannot resume from it: {exc.strerror or exc}") from exc
+        state.columns[g.name] = cols
+        if cols["t"]:
+            firsts.append(cols["t"][0])
+        ep = run_dir / g.name / "estimates.csv"
+        if ep.is_file() and ep.stat().st_size > 0:
+            _cut_torn_tail(ep)
+            last = _cut_estimates_after(ep, cols["t"][-1] if cols["t"] else None)
+            if last is not None:
+                state.estimates_until[g.name] = last
+    if cfg.sampling.epoch is not None:
+        state.t0 = cfg.sampling.epoch
+    elif firsts:
+        state.t0 = min(firsts)
+    n = {g: len(c["t"]) for g, c in state.columns.items()}
+    log.info("resuming %s: kept bins %s; raw log continues in %s", run_dir, n,
+             state.segment.name)
+    return state
