@@ -29,7 +29,7 @@ from .core.data import Samples
 from .core.ml import ml
 from .core.model import Model
 from .core.results import FitResult
-from .errors import DataError, GyrostandError
+from .errors import DataError, GyrostandError, OutputError
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -77,10 +77,18 @@ def append_ledger(path: Path, entry: dict[str, Any]) -> dict[str, Any]:
     steps = read_ledger(path)
     entry = {"step": len(steps) + 1,
              "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), **entry}
-    with path.open("a") as fh:
-        fh.write(json.dumps(entry, allow_nan=False) + "\n")
-        fh.flush()
-        os.fsync(fh.fileno())
+    try:
+        if path.exists() and path.stat().st_size:  # cut a torn last entry (no line end)
+            text = path.read_bytes()
+            if not text.endswith(b"\n"):
+                with path.open("rb+") as fh:
+                    fh.truncate(text.rfind(b"\n") + 1)
+        with path.open("a") as fh:
+            fh.write(json.dumps(entry, allow_nan=False) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot record the step: {exc.strerror or exc}") from exc
     return entry
 
 
@@ -148,13 +156,17 @@ def run_diagnose(subject: Subject, *, record: bool = True) -> Report:
     """Diagnose the subject's current model; append the step to the ledger."""
     rep = diagnose(subject.samples, subject.model)
     if record:
-        append_ledger(subject.ledger_path, {
-            "gyro": subject.gyro, "action": "diagnose", "model": list(subject.model.names),
-            "rms": rep.diagnosis.rms, "loglik": rep.fit.loglik, "adequate": rep.adequate,
-            "ljung_box_p": rep.diagnosis.ljung_box_p,
-            "best_candidate": rep.candidates[0].term if rep.candidates else None,
-            "parameters": {k: e.to_dict() for k, e in rep.fit.parameters.items()},
-        })
+        try:
+            append_ledger(subject.ledger_path, {
+                "gyro": subject.gyro, "action": "diagnose",
+                "model": list(subject.model.names),
+                "rms": rep.diagnosis.rms, "loglik": rep.fit.loglik, "adequate": rep.adequate,
+                "ljung_box_p": rep.diagnosis.ljung_box_p,
+                "best_candidate": rep.candidates[0].term if rep.candidates else None,
+                "parameters": {k: e.to_dict() for k, e in rep.fit.parameters.items()},
+            })
+        except OutputError as exc:  # a diagnosis is still worth showing (e.g. disk full)
+            log.warning("%s (the diagnosis is not in the ledger)", exc)
     return rep
 
 
