@@ -176,8 +176,11 @@ class Daemon:
 class Observer:
     """A ``remote`` client that keeps every frame it receives (a thread reads)."""
 
-    def __init__(self, url: str) -> None:
-        self.bus = can.Bus(interface="remote", channel=url, preserve_timestamps=True)
+    def __init__(self, url: str, ids: Sequence[int] | None = None) -> None:
+        filters = None if ids is None else [{"can_id": i, "can_mask": 0x7FF,
+                                             "extended": False} for i in ids]
+        self.bus = can.Bus(interface="remote", channel=url, preserve_timestamps=True,
+                           can_filters=filters)
         self.frames: list[can.Message] = []
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, daemon=True)
