@@ -9,8 +9,9 @@ that records the daemon's heartbeats. At each crash:
   up to one second of frame time before the daemon's last heartbeat;
 * every *acknowledged* 1-s sample (a complete row of ``samples.csv`` on disk) is
   reproduced exactly by replaying the raw segments recorded so far: samples lost = 0;
-* a torn last line is then injected into ``samples.csv`` (what a kill in the middle of
-  an append leaves): ``diagnose`` on the crashed folder still works.
+* torn last lines are then injected into ``samples.csv``, ``estimates.csv`` and
+  ``ledger.jsonl`` (what a kill in the middle of an append leaves): ``diagnose`` and
+  ``report`` on the crashed folder still work, and the resume cuts them.
 
 After the last resume the run stops on a stop command: one run folder, ``samples.csv``
 starts with the acknowledged rows unchanged, the crash's bins are gaps (n = 0, never
@@ -138,8 +139,17 @@ def _crash_and_resume(tmp_path: Path, kills: int, duration: float) -> None:
             nxt = replayed.get(t_ack + cfg.sampling.dt, f"{t_ack + 1!r},0.123456789,25.5,9,1")
             with samples.open("a") as fh:
                 fh.write(nxt[: len(nxt) // 2])
-            COUNTS["torn_lines"] += 1
+            est = run_dir / "az" / "estimates.csv"
+            last_est = est.read_text().split("\n")[-2]
+            with est.open("a") as fh:
+                fh.write(last_est[: len(last_est) // 3])
+            COUNTS["torn_lines"] += 2
             assert cli_main(["diagnose", str(run_dir), "--json"]) == 0
+            with (run_dir / "ledger.jsonl").open("a") as fh:
+                fh.write('{"step": 99, "gyro": "az", "act')  # a torn ledger entry
+            COUNTS["torn_lines"] += 1
+            if cycle == 0:
+                assert cli_main(["report", str(run_dir), "--out", str(tmp_path / "rep")]) == 0
             # the stand goes on; what it sends while no daemon listens is lost
             t_back = math.ceil(frames[last_sent - 1].timestamp + DOWN)
             idx = next(i for i, f in enumerate(frames) if f.timestamp >= t_back)
