@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 
 #: the paper's recommended linearisation point (MODEL.md: "of order 10^-4")
 PAPER_POINT = 1e-4
+#: the iteration's β stays below BETA_MAX_DT / Δt: a correlation time shorter than the
+#: sampling step is white noise, not a Gauss-Markov drift
+BETA_MAX_DT = 1.0
 ESTIMATED = ("markov.beta", "temp.gamma", "bias.b")
 SUPPORTED = {"markov", "temp", "bias", "white", "random_walk", "markov2"}
 
@@ -272,9 +275,18 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     clipped = [0]  # passes whose beta came out <= 0 and was re-linearised at beta0/3
     if iterate:
         x0, x1, sd, run, settled = _fixed_point(one_pass, lambda: state["passes"], x0, x1,
-                                                sd, run, max_iter, tol, clipped)
+                                                sd, run, max_iter, tol, clipped,
+                                                BETA_MAX_DT / samples.dt)
         if not settled:
             warnings.append(f"lkf: iteration did not settle within {max_iter} passes")
+        b_end = float(x0[0])
+        dur = max(float(samples.t[-1] - samples.t[0]), samples.dt)
+        if b_end >= 0.99 * BETA_MAX_DT / samples.dt or b_end < 0.1 / dur:
+            warnings.append(
+                f"lkf: the iteration ended at beta = {b_end:.3g} 1/s, outside the plausible "
+                f"range [{0.1 / dur:.2g}, {BETA_MAX_DT / samples.dt:.2g}]: a spurious fixed "
+                "point along the γ/β ridge (measured: 20 % of C2 fits); linearise at an "
+                "lsq or ml estimate instead")
     point = dict(zip(keys, map(float, x0), strict=True))
     est = run["final"]
     if est["markov.beta"][0] <= 0:
@@ -299,7 +311,7 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     )
 
 
-def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped):
+def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max):
     """Re-linearise until the estimate equals the linearisation point: x = g(x).
 
     Plain re-linearisation converges linearly (slowly along the γ/β ridge); every step is
@@ -313,7 +325,7 @@ def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped):
         if x_new[0] <= 0:  # typical of the first passes from the paper's 1e-4 point
             clipped[0] += 1
             x_new[0] = x_old[0] / 3
-        x_new[0] = min(max(x_new[0], x_old[0] / 10), x_old[0] * 10)
+        x_new[0] = min(max(x_new[0], x_old[0] / 10), x_old[0] * 10, beta_max)
         return x_new
 
     def small(a, b, s):

@@ -181,8 +181,12 @@ def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
     axes = []
     dur, dt = prob.duration, prob.samples.dt
     for n in prob.rates:
-        if n == "markov.beta" and beta0 is not None:
-            vals = [beta0, beta0 * 3, beta0 / 3, beta0 / 10]
+        if n == "markov.beta":
+            # least squares' β seeds the grid, but with measurement noise it is biased by
+            # orders of magnitude (errors in variables): a wide geometric axis as well
+            vals = list(np.geomspace(2.0 / dur, 0.5 / dt, 5))
+            if beta0 is not None:
+                vals += [beta0, beta0 * 3, beta0 / 3]
         elif prob.model.kind(n) == "time":
             vals = list(np.geomspace(10 * dt, dur / 3, 4))
         else:
@@ -190,7 +194,7 @@ def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
         axes.append([np.log(v) for v in vals])
     for n in prob.stds:
         if n == "white.sigma":
-            rel = [1e-3, 0.1, 1.0]
+            rel = [1e-3, 0.03, 0.3, 1.0]
         elif n == "random_walk.q":
             rel = [0.03 / np.sqrt(dur), 0.3 / np.sqrt(dur), 3 / np.sqrt(dur)]
         else:
@@ -348,12 +352,14 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         order = np.argsort(vals)
         if n_local is None:
             n_local = 2 if len(prob.rates) <= 1 else 5
-        # the best start of each distinct combination of rates: different basins
-        chosen, seen = [], set()
+        # best first, then the best of those whose rates differ by a factor > 5 from every
+        # start already chosen: different basins (with measurement noise the likelihood
+        # of β has a spurious maximum near 1/Δt besides the true one)
+        chosen: list[int] = []
+        nr = len(prob.rates)
         for i in order:
-            key = tuple(np.round(starts[i][:len(prob.rates)], 6))
-            if key not in seen:
-                seen.add(key)
+            if all(np.max(np.abs(starts[i][:nr] - starts[j][:nr]), initial=0.0) > np.log(5)
+                   for j in chosen):
                 chosen.append(i)
             if len(chosen) >= max(1, n_local):
                 break
