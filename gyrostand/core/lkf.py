@@ -31,8 +31,9 @@ import numpy as np
 from ..errors import GyrostandError, ModelError
 from .data import Samples
 from .kalman import foh_weights, kf_step
-from .model import Model
+from .model import Model, context
 from .results import Estimate, FitResult
+from .terms import HYSTERESIS_RATE, T_REF, TERMS
 from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
@@ -42,8 +43,17 @@ PAPER_POINT = 1e-4
 #: the iteration's β stays below BETA_MAX_DT / Δt: a correlation time shorter than the
 #: sampling step is white noise, not a Gauss-Markov drift
 BETA_MAX_DT = 1.0
-ESTIMATED = ("markov.beta", "temp.gamma", "bias.b")
-SUPPORTED = {"markov", "temp", "bias", "white", "random_walk", "markov2"}
+#: input terms of the drift: the linear coefficient's state enters the δε row with the
+#: term's input u(T) (FOH), and γ₀·u drives the moving point ε₀
+INPUTS = {"temp.gamma": "temp", "temp2.gamma2": "temp2"}
+#: output terms: the coefficient's state enters the measurement with the regressor x_k
+OUTPUTS = {"bias.b": "bias", "temp_rate.k": "temp_rate", "hysteresis.h": "hysteresis",
+           "trend.c": "trend", "warmup.A": "warmup"}
+ESTIMATED = ("markov.beta", *INPUTS, *OUTPUTS)
+SUPPORTED = {"markov", "temp", "temp2", "bias", "temp_rate", "hysteresis", "trend", "warmup",
+             "white", "random_walk", "markov2"}
+#: samples of the causal dT/dt estimate of the online filter (a least-squares slope)
+ONLINE_RATE_WINDOW = 61
 
 
 def lkf_layout(model: Model) -> list[str]:
@@ -54,10 +64,8 @@ def lkf_layout(model: Model) -> list[str]:
     if extra:
         raise ModelError(f"lkf does not support the term(s) {', '.join(extra)}; use ml")
     names = ["delta_eps", "markov.beta"]
-    if "temp" in model:
-        names.append("temp.gamma")
-    if "bias" in model:
-        names.append("bias.b")
+    names += [k for k, term in INPUTS.items() if term in model]
+    names += [k for k, term in OUTPUTS.items() if term in model]
     if "random_walk" in model:
         names.append("random_walk")
     if "markov2" in model:
@@ -66,7 +74,7 @@ def lkf_layout(model: Model) -> list[str]:
 
 
 def held_names(model: Model) -> list[str]:
-    """Parameters the LKF holds at given values (noise levels, β₂)."""
+    """Parameters the LKF holds at given values (noise levels, β₂, the warm-up's τ)."""
     return [n for n in model.param_names if n not in ESTIMATED]
 
 
@@ -86,7 +94,8 @@ class OnlineLKF:
 
     def __init__(self, model: Model, dt: float, *, beta0: float = PAPER_POINT,
                  gamma0: float = PAPER_POINT, b0: float = 0.0,
-                 held: Mapping[str, float], prior_std: Mapping[str, float] | None = None):
+                 held: Mapping[str, float], prior_std: Mapping[str, float] | None = None,
+                 point: Mapping[str, float] | None = None):
         self.model, self.dt = model, float(dt)
         self.layout = lkf_layout(model)
         missing = [n for n in held_names(model) if n not in held]
@@ -97,6 +106,19 @@ class OnlineLKF:
         self.beta0 = float(beta0)
         self.gamma0 = float(gamma0) if "temp" in model else 0.0
         self.b0 = float(b0) if "bias" in model else 0.0
+        # linearisation point of every estimated coefficient (beyond β₀, γ₀, b₀: 0)
+        self.point = {k: 0.0 for k in self.layout if k in ESTIMATED}
+        self.point.update({k: float(v) for k, v in (point or {}).items() if k in self.point})
+        self.point.update({"markov.beta": self.beta0})
+        if "temp.gamma" in self.point:
+            self.point["temp.gamma"] = self.gamma0
+        if "bias.b" in self.point:
+            self.point["bias.b"] = self.b0
+        self._inputs = [(self.layout.index(k), k) for k in INPUTS if k in self.point]
+        self._outputs = [(self.layout.index(k), k) for k in OUTPUTS if k in self.point]
+        self._u_prev: dict[str, float] = {}
+        self._calls = 0
+        self._Tbuf: list[float] = []
         self.held = {k: float(held[k]) for k in held_names(model)}
         self.prior_std = dict(prior_std or {})
         n = len(self.layout)
@@ -109,9 +131,7 @@ class OnlineLKF:
         self.H = np.zeros(n)
         self.H[0] = 1.0
         for i, name in enumerate(self.layout):
-            if name == "bias.b":
-                self.H[i] = 1.0
-            elif name == "random_walk":
+            if name == "random_walk":
                 self.H[i] = 1.0
                 self.Qd[i] = self.held["random_walk.q"] ** 2 * self.dt
             elif name == "markov2":
@@ -135,16 +155,22 @@ class OnlineLKF:
         β ≤ 1/Δt; |γ| ≲ β|ε|/|T| (from the steady state γT = βε); |b| ≲ |y|.
         """
         ys = abs(y0) + y_scale
+        Ts = max(abs(T0), T_scale, 1e-6)
         return {
             "markov.beta": 1.0 / dt,
-            "temp.gamma": ys / (dt * max(abs(T0), T_scale, 1e-6)),
+            "temp.gamma": ys / (dt * Ts),
+            "temp2.gamma2": ys / (dt * Ts * Ts),
             "bias.b": 10 * ys,
+            "temp_rate.k": 10 * ys * 600.0,   # |k| dT/dt ≲ |y| at 0.1 degC/min
+            "hysteresis.h": 10 * ys,
+            "trend.c": 10 * ys / 3600.0,        # ≲ |y| per hour
+            "warmup.A": 10 * ys,
         }
 
     def _start(self, y: float, T: float) -> None:
         n = len(self.layout)
-        # the moving point starts at the first measurement
-        self._eps0 = y - self.b0
+        # the moving point starts at the first measurement (less the output terms' part)
+        self._eps0 = y - sum(self.point[k] * self._regressor(k, T) for _, k in self._outputs)
         self._T = T
         ps = self.prior_std or self.default_prior_std(
             self.model, self.dt, y, T, self.held["markov.sigma"], 1.0)
@@ -158,36 +184,79 @@ class OnlineLKF:
                 P[i, i] = self.held["markov2.sigma"] ** 2
         self.P = P
 
-    def update(self, y: float, T: float) -> tuple[float, float]:
+    def _input(self, key: str, T: float) -> float:
+        """The input u(T) of an input term: T for temp, (T − T_ref)² for temp2."""
+        return T if key == "temp.gamma" else (T - T_REF) ** 2
+
+    def _regressor(self, key: str, T: float) -> float:
+        """Regressor of an output term at this sample, computed causally (online use)."""
+        t = (self._calls - 1) * self.dt
+        if key == "bias.b":
+            return 1.0
+        if key == "trend.c":
+            return t
+        if key == "warmup.A":
+            return math.exp(-t / self.held["warmup.tau"])
+        rate = self._causal_rate()
+        return rate if key == "temp_rate.k" else math.tanh(rate / HYSTERESIS_RATE)
+
+    def _causal_rate(self) -> float:
+        """dT/dt (degC/s): least-squares slope of the last ``ONLINE_RATE_WINDOW`` samples."""
+        n = len(self._Tbuf)
+        if n < 3:
+            return 0.0
+        x = np.arange(n) - (n - 1) / 2
+        return float(x @ np.asarray(self._Tbuf) / (x @ x) / self.dt)
+
+    def update(self, y: float, T: float,
+               regressors: Mapping[str, float] | None = None) -> tuple[float, float]:
         """Process one sample: drift ``y`` (NaN = gap, predict only), temperature ``T``.
 
-        Returns the innovation and its variance (NaN for a gap).
+        ``regressors`` (optional) gives the output terms' regressor values at this sample
+        by parameter name (the batch filter passes the same centred dT/dt as ML); those not
+        given are computed causally. Returns the innovation and its variance (NaN for a gap).
         """
+        self._calls += 1
+        self._Tbuf.append(T)
+        if len(self._Tbuf) > ONLINE_RATE_WINDOW:
+            del self._Tbuf[0]
         if self.k == 0:
             if math.isnan(y):
                 return math.nan, math.nan  # the filter starts at the first measured sample
             self._start(y, T)
+            for _, key in self._inputs:
+                self._u_prev[key] = self._input(key, T)
             A = self._no_predict
         else:
             eps_prev = self._eps0
-            u = self.a0 * self._T + self.a1 * T
-            self._eps0 = self.phi0 * eps_prev + self.gamma0 * u
-            # row of δε: φ₀ δε − ∫ε₀ δβ + ∫T δγ (FOH weights a0, a1)
+            drive = 0.0
+            for i, key in self._inputs:
+                uk = self._input(key, T)
+                u = self.a0 * self._u_prev[key] + self.a1 * uk
+                self._u_prev[key] = uk
+                drive += self.point[key] * u
+                self.A[0, i] = u  # ∫u δθ (FOH weights a0, a1)
+            self._eps0 = self.phi0 * eps_prev + drive
+            # row of δε: φ₀ δε − ∫ε₀ δβ + Σ ∫u_j δθ_j
             self.A[0, 1] = -(self.a0 * eps_prev + self.a1 * self._eps0)
-            if "temp" in self.model:
-                self.A[0, 2] = u
             self._T = T
             A = self.A
         self.k += 1
-        z = y - self._eps0 - self.b0
+        z = y - self._eps0
+        for i, key in self._outputs:
+            x = (regressors or {}).get(key)
+            if x is None:
+                x = self._regressor(key, T)
+            self.H[i] = x
+            z -= self.point[key] * x
         e, f = kf_step(self.x, self.P, A, self.Qd, self.H, self.r, z)
         return float(e), float(f)
 
     @property
     def estimates(self) -> dict[str, tuple[float, float]]:
         """Current ``name -> (value, std)`` of the estimated parameters."""
-        base = {"markov.beta": self.beta0, "temp.gamma": self.gamma0, "bias.b": self.b0}
-        return {name: (base[name] + float(self.x[i]), float(math.sqrt(max(self.P[i, i], 0.0))))
+        return {name: (self.point[name] + float(self.x[i]),
+                       float(math.sqrt(max(self.P[i, i], 0.0))))
                 for i, name in enumerate(self.layout) if name in ESTIMATED}
 
     @property
@@ -257,18 +326,24 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
     keys = [k for k in ESTIMATED if k in layout]
     state = {"passes": 0}
 
+    # the output terms' regressors as ML sees them (centred dT/dt, time from the start)
+    ctx = context(samples)
+    regs = {k: TERMS[term]().regressors(hv, ctx)[k] for k, term in OUTPUTS.items()
+            if term in model}
+
     def one_pass(pt: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
         """g(point): the estimate (and its std) of one LKF pass linearised at ``pt``."""
         point = dict(zip(keys, pt, strict=True))
         f = OnlineLKF(model, samples.dt, beta0=point["markov.beta"],
                       gamma0=point.get("temp.gamma", 0.0), b0=point.get("bias.b", 0.0),
-                      held=hv, prior_std=ps)
-        run = _run(f, samples)
+                      held=hv, prior_std=ps, point=point)
+        run = _run(f, samples, regs)
         state["passes"] += 1
         return (np.array([run["final"][k][0] for k in keys]),
                 np.array([run["final"][k][1] for k in keys]), run)
 
-    x0 = np.array([{"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}[k] for k in keys])
+    start = {"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}
+    x0 = np.array([start.get(k, 0.0) for k in keys])
     first_point = dict(zip(keys, map(float, x0), strict=True))
     x1, sd, run = one_pass(x0)
     settled = not iterate
@@ -356,7 +431,7 @@ def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max):
             return x0, x1, sd, run, small(x1, x0, sd)
 
 
-def _run(f: OnlineLKF, samples: Samples) -> dict:
+def _run(f: OnlineLKF, samples: Samples, regs: Mapping[str, np.ndarray]) -> dict:
     N = len(samples)
     e = np.empty(N)
     fv = np.empty(N)
@@ -366,7 +441,8 @@ def _run(f: OnlineLKF, samples: Samples) -> dict:
     hist["drift"] = np.empty(N)
     y, T = samples.drift, samples.temp
     for k in range(N):
-        e[k], fv[k] = f.update(float(y[k]), float(T[k]))
+        e[k], fv[k] = f.update(float(y[k]), float(T[k]),
+                               {n: float(r[k]) for n, r in regs.items()})
         for n, (v, s) in f.estimates.items():
             hist[n][k] = v
             hist[n + ":std"][k] = s

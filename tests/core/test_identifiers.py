@@ -254,3 +254,23 @@ def test_iterated_lkf_flags_an_implausible_fixed_point(base_model):
             assert any("spurious fixed point" in w or "did not settle" in w
                        for w in r.warnings), r.warnings
     assert flagged >= 1  # the seeds include such a fit (20 % of C2 fits, paper_tables)
+
+
+LINEAR_EFFECTS = {"temp_rate": {"temp_rate.k": 5.0}, "hysteresis": {"hysteresis.h": 0.05},
+                  "trend": {"trend.c": 1e-5}, "warmup": {"warmup.A": 0.5, "warmup.tau": 900.0},
+                  "temp2": {"temp2.gamma2": 5e-6}}
+
+
+@pytest.mark.parametrize("term", list(LINEAR_EFFECTS))
+def test_lkf_estimates_the_linear_effect_terms(term):
+    """Where the paper's linearisation applies (coefficients of inputs and outputs), the
+    LKF carries them as correction states; the warm-up's τ is held (at the ML value)."""
+    m = Model.parse(["markov", "temp", "bias", term])
+    p = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+         "white.sigma": 0.02, "bias.b": 0.3, **LINEAR_EFFECTS[term]}
+    s = simulate(m, p, chamber_profile(4), seed=11)
+    r = lkf(s, m, iterate=True, beta0=0.02, gamma0=-0.001)
+    assert r.info["settled"]
+    name = next(iter(LINEAR_EFFECTS[term]))
+    within(r, p, name, rel=0.3)
+    within(r, p, "temp.gamma", rel=0.3)
