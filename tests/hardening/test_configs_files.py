@@ -16,6 +16,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import can
@@ -186,10 +187,15 @@ def test_full_disk_stops_cleanly_naming_the_file_and_keeps_what_was_written(tmp_
         run_dir = daemon.run_dir(daemon.wait_for("ready: "))
         stand = can.Bus(interface="remote", channel=srv.url, preserve_timestamps=True)
 
-        def flood() -> None:  # as fast as the link goes, until the daemon gives up
+        def flood() -> None:  # ~4,400 frames/s (the disk fills in a few seconds)
+            t0, w0 = None, time.monotonic()
             for f in simulated_frames(cfg):
                 if daemon.proc.poll() is not None:
                     return
+                t0 = f.timestamp if t0 is None else t0
+                delay = w0 + (f.timestamp - t0) / 40.0 - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
                 try:
                     stand.send(f)
                 except Exception:
