@@ -52,7 +52,7 @@ from ..can.bus import open_bus
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
-from .outputs import RunLog, check_writable, make_run_dir
+from .outputs import RunLock, RunLog, check_writable, make_run_dir
 from .pipeline import BusSink, Pipeline, RunOutcome
 from .resume import find_resume_dir, prepare_resume
 
@@ -161,19 +161,33 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     for the session's newest run folder under ``out``).
     """
     state = None
+    lock: RunLock | None = None
     if resume is not None and resume is not False:
         run_dir = find_resume_dir(cfg, None if resume is True else str(resume) or None, out)
-        state = prepare_resume(cfg, run_dir)
+        lock = RunLock(run_dir)  # before touching its files: no other daemon writes it
+        try:
+            state = prepare_resume(cfg, run_dir)
+        except BaseException:
+            lock.release()
+            raise
         raw_path = state.segment
-    bus = open_bus(cfg.bus)
+    try:
+        bus = open_bus(cfg.bus)
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
     try:
         if state is None:
             run_dir = make_run_dir(out or cfg.output, cfg.name)
             raw_path = run_dir / "raw.blf"
+            lock = RunLock(run_dir)
         check_writable(run_dir)
         runlog = RunLog(run_dir)
     except BaseException:
         bus.shutdown()
+        if lock is not None:
+            lock.release()
         raise
     stop = stop_event or threading.Event()
     signalled: list[str] = []
@@ -234,6 +248,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             except Exception as exc:
                 log.warning("bus shutdown: %s", exc)
         runlog.close()
+        if lock is not None:
+            lock.release()
 
 
 def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Event,

@@ -24,6 +24,7 @@ leaves out a torn last line (no line end).
 from __future__ import annotations
 
 import csv
+import fcntl
 import logging
 import math
 import os
@@ -37,7 +38,7 @@ from ..errors import OutputError
 from .online import OnlineEstimate
 
 __all__ = ["make_run_dir", "RunLog", "EstimatesWriter", "estimate_columns", "write_atomic",
-           "raw_segments", "next_raw_segment", "latest_run_dir"]
+           "raw_segments", "next_raw_segment", "latest_run_dir", "RunLock", "check_writable"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +61,34 @@ def make_run_dir(output: str | Path, name: str, wall: float | None = None) -> Pa
         except OSError as exc:
             raise OutputError(f"{path}: cannot create the run folder: "
                               f"{exc.strerror or exc}") from exc
+
+
+class RunLock:
+    """An exclusive ``flock`` on ``<run>/.lock`` for as long as a daemon writes the folder:
+    a second daemon (e.g. ``--resume`` of a folder still being written) is refused; the
+    kernel drops the lock when the holder dies, even by ``kill -9``."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self.path = run_dir / ".lock"
+        try:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot create the run folder's lock: "
+                              f"{exc.strerror or exc}") from exc
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(self._fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(self._fd)
+            raise OutputError(f"{run_dir}: in use by a running daemon (pid {holder})") \
+                from None
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
+
+    def release(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)  # releases the lock
+            self._fd = -1
 
 
 def check_writable(run_dir: Path) -> None:

@@ -13,7 +13,8 @@ that records the daemon's heartbeats. At each crash:
   ``ledger.jsonl`` (what a kill in the middle of an append leaves): ``diagnose`` and
   ``report`` on the crashed folder still work, and the resume cuts them.
 
-After the last resume the run stops on a stop command: one run folder, ``samples.csv``
+A second daemon resuming the folder while the first writes it is refused (exit 2). After
+the last resume the run stops on a stop command: one run folder, ``samples.csv``
 starts with the acknowledged rows unchanged, the crash's bins are gaps (n = 0, never
 invented), the raw log continues in ``raw-2.blf``, ..., the ledger is kept, the estimates
 cover every bin, and replaying all segments reproduces every row outside the crash gaps.
@@ -154,14 +155,20 @@ def _crash_and_resume(tmp_path: Path, kills: int, duration: float) -> None:
             t_back = math.ceil(frames[last_sent - 1].timestamp + DOWN)
             idx = next(i for i, f in enumerate(frames) if f.timestamp >= t_back)
             gaps.append((t_ack, float(t_back)))
-        # the last (resumed) daemon gets the rest and a stop command
+        # the last (resumed) daemon gets the rest and a stop command; a second daemon
+        # resuming the same folder meanwhile is refused (the folder is locked)
         assert run_dir is not None
+        other = Daemon(cfg_path, "--out", str(runs), "--resume")
+        daemons.append(other)
+        rc2, err2 = other.finish(timeout=60)
+        assert rc2 == 2 and f"{run_dir}: in use by a running daemon (pid " \
+            f"{daemons[-2].proc.pid})" in err2, err2
         ledger_before = (run_dir / "ledger.jsonl").read_text()
         send_paced(stand, frames[idx:], SPEED * 2)
         enc = FrameEncoder(cfg.db)
         stand.send(enc.command_frame(cfg.responses.command, "stop", 9, 1,
                                      timestamp=frames[-1].timestamp + 0.01))
-        rc, err = daemons[-1].finish()
+        rc, err = daemons[-2].finish()
         assert rc == 0, err
     finally:
         for d in daemons:
