@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import os
+import resource
 import subprocess
 import sys
 import threading
@@ -141,14 +142,14 @@ def _umount(where: Path) -> None:
 
 @pytest.fixture
 def mounts(tmp_path):
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root")
     made: list[Path] = []
 
-    def mount(name: str, opts: str) -> Path:
+    def mount(name: str, opts: str, required: bool = True) -> Path | None:
         p = Path(f"/tmp/hard_mnt_{os.getpid()}_{name}")
-        if not _mount(p, opts):
-            pytest.skip("cannot mount a tmpfs here")
+        if os.geteuid() != 0 or not _mount(p, opts):
+            if required:
+                pytest.skip("cannot mount a tmpfs here (needs root)")
+            return None
         made.append(p)
         return p
 
@@ -170,9 +171,18 @@ def test_read_only_output_folder_names_the_path(tmp_path, mounts):
     assert str(ro / "runs") in r.stderr and "Read-only file system" in r.stderr
 
 
+def _limit_file_size() -> None:  # in the daemon's process, before exec
+    resource.setrlimit(resource.RLIMIT_FSIZE, (256 * 1024, 256 * 1024))
+
+
 def test_full_disk_stops_cleanly_naming_the_file_and_keeps_what_was_written(tmp_path,
                                                                          mounts):
-    disk = mounts("full", "size=256k")
+    """A 256 KiB tmpfs as the output folder; where no tmpfs can be mounted (not root), a
+    256 KiB file-size limit (RLIMIT_FSIZE) on the daemon's process instead (Python
+    ignores SIGXFSZ, so a write past it fails with EFBIG like a full disk)."""
+    disk = mounts("full", "size=256k", required=False)
+    expect = "No space left on device" if disk else "File too large"
+    disk = disk or tmp_path
     srv = RemoteServer().start()
     cfg_path = write_config(tmp_path / "full.yaml", disk / "runs",
                             {"interface": "remote", "channel": srv.url,
@@ -180,7 +190,7 @@ def test_full_disk_stops_cleanly_naming_the_file_and_keeps_what_was_written(tmp_
                             sim={"duration": 3000.0, "rates": {"drift": 100,
                                                                 "temperature": 10}})
     cfg = load_config(cfg_path)
-    daemon = Daemon(cfg_path)
+    daemon = Daemon(cfg_path, preexec_fn=None if disk != tmp_path else _limit_file_size)
     stand = None
     sent = [0]
     try:
@@ -213,7 +223,7 @@ def test_full_disk_stops_cleanly_naming_the_file_and_keeps_what_was_written(tmp_
         srv.stop()
     assert rc == 1, (rc, err, daemon.out)
     stopped = next(ln for ln in daemon.out if ln.startswith("stopped: "))
-    assert "No space left on device" in stopped and "state fault" in stopped, stopped
+    assert expect in stopped and "state fault" in stopped, stopped
     assert str(run_dir) in stopped  # the message names the file that failed
     assert sent[0] > 5000
     # what was written is intact: samples readable, raw log readable and replaying to them
