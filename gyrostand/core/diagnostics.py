@@ -184,6 +184,8 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
     f = np.asarray(result.residual_var, dtype=float)
     z = e / np.sqrt(f)
     n = int(np.count_nonzero(np.isfinite(z)))
+    # a short record cannot carry 60 lags: at most a quarter of its length
+    xcorr_lags = max(1, min(xcorr_lags, len(samples) // 4))
     if lags is None:
         lags = int(min(max(10, np.log(max(n, 2))), max(1, n // 5)))
     q, pval = ljung_box(z, lags)

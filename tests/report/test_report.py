@@ -136,7 +136,7 @@ def test_ledger_steps_show_and_a_report_does_not_write_the_ledger(chamber_csv, t
     text = " ".join(parse(path).text)
     assert "markov,temp,white,bias,temp_rate" in text
     assert "+temp_rate" in text and "diagnose" in text
-    assert "ML fits on the first" in text  # the LKF cannot represent temp_rate
+    assert "linearised Kalman filter" in text  # the LKF carries temp_rate's coefficient
     assert {i["src"] for i in parse(path).imgs} == FIGURES
     assert html.count("<tr>") >= 2 + 5
 
