@@ -107,16 +107,22 @@ class _Problem:
             p[n] = 0.0
         return p
 
-    def profile(self, z: np.ndarray):
-        """Concentrated ln L at ``z``; also θ̂, scale s² and the GLS information."""
-        self.nevals += 1
-        p = self.unpack(z)
+    def gram(self, p: Mapping[str, float]) -> tuple[np.ndarray, float, int]:
+        """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
+        the innovations, Σ ln f, and the number of observed samples."""
         X = self.model.regressors(p, self.ctx)
         phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
         Y[:, 1:] = X
         _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        return G, slogf, n
+
+    def profile(self, z: np.ndarray):
+        """Concentrated ln L at ``z``; also θ̂, scale s² and the GLS information."""
+        self.nevals += 1
+        p = self.unpack(z)
+        G, slogf, n = self.gram(p)
         if not np.isfinite(slogf):
             return -np.inf, None
         # e = E c0 - E_free θ with c0 = [1, -θ_fixed...]: S(θ) = c0'Gc0 - 2 b'θ + θ'Aθ
@@ -147,12 +153,7 @@ class _Problem:
     def full_loglik(self, p: Mapping[str, float]) -> float:
         """Exact ln L at natural parameters ``p`` (nothing concentrated): equals
         :meth:`Model.loglik`, from the Gram matrix of the filtered columns."""
-        X = self.model.regressors(p, self.ctx)
-        phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
-        Y = np.empty((X.shape[0], 1 + X.shape[1]))
-        Y[:, 0] = self.samples.drift
-        Y[:, 1:] = X
-        _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        G, slogf, n = self.gram(p)
         if not np.isfinite(slogf):
             return -np.inf
         c = np.empty(G.shape[0])
