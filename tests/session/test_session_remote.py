@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -26,21 +25,8 @@ from gyrostand.session.offline import run_replay, simulated_frames
 
 pytest.importorskip("can_remote")
 
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_port(port: int, timeout: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return
-        time.sleep(0.05)
-    raise TimeoutError(f"nothing listens on 127.0.0.1:{port}")
+from tests.hardening.procs import free_port as _free_port  # noqa: E402
+from tests.hardening.procs import wait_port as _wait_port  # noqa: E402
 
 
 @pytest.fixture(scope="module")
