@@ -39,6 +39,7 @@ from typing import Any
 import yaml
 
 from gyrostand.can.dbc import MessageRef, SignalRef, find_message, find_signal, load_dbc
+from gyrostand.core.terms import VOCABULARY
 from gyrostand.errors import CanEdgeError, ConfigError
 
 __all__ = [
@@ -61,10 +62,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
-MODEL_TERMS = (
-    "markov", "temp", "white", "bias", "temp2", "temp_lag", "temp_rate", "hysteresis",
-    "trend", "warmup", "random_walk", "markov2",
-)
+MODEL_TERMS = VOCABULARY
 IDENTIFIERS = ("lkf", "lsq", "ml")
 
 #: Signals the daemon writes or reads in its own response/command messages.

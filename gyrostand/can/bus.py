@@ -16,6 +16,7 @@ import can
 from cantools.database.can import Database, Message
 
 from gyrostand.can.dbc import MessageRef, find_message
+from gyrostand.core.terms import VOCABULARY
 from gyrostand.errors import CanEdgeError
 
 __all__ = [
@@ -33,10 +34,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bit i of ``ModelTerms`` in GS_SUMMARY = term i (PRODUCT.md's vocabulary order).
-MODEL_TERM_BITS = (
-    "markov", "temp", "white", "bias", "temp2", "temp_lag", "temp_rate", "hysteresis",
-    "trend", "warmup", "random_walk", "markov2",
-)
+MODEL_TERM_BITS = VOCABULARY
 IDENTIFIER_CODES = {"lkf": 0, "lsq": 1, "ml": 2}
 STATE_CODES = {"idle": 0, "running": 1, "stopping": 2, "stopped": 3, "fault": 4}
 STATUS_CODES = {"ok": 0, "warning": 1, "not_converged": 2, "failed": 3,
