@@ -91,3 +91,16 @@ def test_two_hidden_effects_are_found_one_after_the_other(tmp_path):
     for name, truth in extra.items():
         e = final.fit.parameters[name]
         assert abs(e.value - truth) <= 4 * e.std
+
+
+def test_look_alikes_are_named_with_the_profile_that_separates_them(tmp_path):
+    """A trend over 4 hours is also fitted by a warm-up with a long time constant: the
+    diagnosis must say that both explain the data about equally well, and how to tell them
+    apart (a longer record after switch-on)."""
+    path = chamber_run(tmp_path, ["trend"], HIDDEN["trend"][0], seed=102)
+    rep = run_diagnose(open_subject(path), record=False)
+    pairs = [set(la["terms"]) for la in rep.look_alikes]
+    assert {"trend", "warmup"} in pairs, rep.look_alikes
+    advice = next(la["advice"] for la in rep.look_alikes if set(la["terms"]) == {"trend", "warmup"})
+    assert "warm-up settles" in advice
+    assert rep.to_dict()["look_alikes"]  # in the JSON too
