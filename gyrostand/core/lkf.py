@@ -6,11 +6,15 @@ With ε = ε₀(t) + δε, β = β₀ + δβ, γ = γ₀ + δγ, b = b₀ + δb 
     dδε/dt = −β₀ δε − ε₀(t) δβ + T(t) δγ + √(2σ²β₀) w
     Y_k − ε₀_k − b₀ = δε_k + δb + (other processes) + v_k
 
-State ``[δε, δβ, (δγ), (δb), (r), (ε₂)]``: the parameter corrections are constant states;
-further random processes of the model (``random_walk`` r, ``markov2`` ε₂) are stacked with
-their own dynamics and enter the measurement with coefficient 1. β₀, γ₀ stay fixed during a
-pass; ε₀ is propagated. Discretisation is exact in δε (φ₀ = e^{−β₀Δt}) with the inputs
-ε₀(t) and T(t) linear between samples.
+State ``[δε, δβ, (δγ), (δγ₂), (δb), (δk), (δh), (δc), (δA), (r), (ε₂)]``: the parameter
+corrections are constant states. Input terms (``temp``, ``temp2``) enter the δε row with
+their input u(T) and drive ε₀ with their linearisation coefficient; output terms (``bias``,
+``temp_rate``, ``hysteresis``, ``trend``, ``warmup`` with τ held) enter the measurement with
+their regressor x_k (a time-varying H), which is exact since they are linear. Further random
+processes (``random_walk`` r, ``markov2`` ε₂) are stacked with their own dynamics and enter
+the measurement with coefficient 1. The linearisation point stays fixed during a pass; ε₀
+is propagated. Discretisation is exact in δε (φ₀ = e^{−β₀Δt}) with the inputs ε₀(t) and
+u(t) linear between samples.
 
 Noise levels (σ, σ_v, and those of the other processes) are *held*, as in the paper where
 σ is known: given by the caller, or estimated beforehand (least squares' moments when the
