@@ -6,18 +6,16 @@ to the same 1-s samples."""
 from __future__ import annotations
 
 import json
-import queue
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import can
 import pytest
 import yaml
-from sessionhelpers import ROOT, decode, write_cfg_yaml
+from sessionhelpers import decode, write_cfg_yaml
 
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.config import load_config
@@ -25,6 +23,7 @@ from gyrostand.session.offline import run_replay, simulated_frames
 
 pytest.importorskip("can_remote")
 
+from tests.hardening.procs import Daemon  # noqa: E402
 from tests.hardening.procs import free_port as _free_port  # noqa: E402
 from tests.hardening.procs import wait_port as _wait_port  # noqa: E402
 
@@ -44,49 +43,12 @@ def server():
         proc.wait(10)
 
 
-class Daemon:
-    """``gyrostand run CONFIG --out DIR`` in a subprocess; stdout lines in a queue."""
-
-    def __init__(self, cfg_path, out):
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "gyrostand", "run", str(cfg_path), "--out", str(out)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.out: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def wait_for(self, prefix: str, timeout: float = 60.0) -> str:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                line = self.lines.get(timeout=0.2)
-            except queue.Empty:
-                if self.proc.poll() is not None:
-                    break
-                continue
-            self.out.append(line)
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"no {prefix!r} line; stdout {self.out}, "
-                             f"stderr {self.proc.stderr.read() if self.proc.poll() else ''}")
-
-    def finish(self, timeout: float = 60.0) -> tuple[int, str]:
-        rc = self.proc.wait(timeout)
-        while not self.lines.empty():
-            self.out.append(self.lines.get())
-        return rc, self.proc.stderr.read()
-
-
 def _start(tmp_path, server, duration):
     bus = {"interface": "remote", "channel": server, "preserve_timestamps": True}
     cfg_path = write_cfg_yaml(tmp_path / "remote.yaml", tmp_path / "runs", bus,
                               duration=duration, rates={"drift": 10, "temperature": 10})
     cfg = load_config(cfg_path)
-    daemon = Daemon(cfg_path, tmp_path / "runs")
+    daemon = Daemon(cfg_path, "--out", str(tmp_path / "runs"))
     ready = daemon.wait_for("ready: ")
     client = can.Bus(interface="remote", channel=server, preserve_timestamps=True)
     return cfg, daemon, ready, client
@@ -173,7 +135,7 @@ def test_run_process_ends_with_fault_when_the_bus_dies(tmp_path):
         d = yaml.safe_load(cfg_path.read_text())
         d["reconnect"] = {"max_time": 1.0, "first_delay": 0.1}  # retry 1 s, then fault
         cfg_path.write_text(yaml.safe_dump(d))
-        daemon = Daemon(cfg_path, tmp_path / "runs")
+        daemon = Daemon(cfg_path, "--out", str(tmp_path / "runs"))
         ready = daemon.wait_for("ready: ")
     finally:
         srv.kill()  # the server goes away under the daemon
