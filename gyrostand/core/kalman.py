@@ -20,6 +20,20 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
+    """P = B (I − K H)' + K r K' with B = (I − K H) P and BH = B H', kept symmetric."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = B[i, j] - BH[i] * K[j] + K[i] * r * K[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+
+
 @njit(cache=True, nogil=True)
 def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
     """Filter every column of ``Y`` (shape (N, m)) with the same gains.
@@ -97,14 +111,7 @@ def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
                 for j in range(n):
                     s += A[i, j]
                 AH[i] = s
-            for i in range(n):
-                for j in range(n):
-                    P[i, j] = A[i, j] - AH[i] * K[j] + K[i] * r * K[j]
-            for i in range(n):
-                for j in range(i + 1, n):
-                    s = 0.5 * (P[i, j] + P[j, i])
-                    P[i, j] = s
-                    P[j, i] = s
+            _joseph_finish(P, A, AH, K, r)
         # predict: x = F x ; P = F P F' + Q  (F, Q diagonal)
         for i in range(n):
             for c in range(m):
@@ -195,14 +202,7 @@ def kf_step(x, P, A, Qd, H, r, z):  # pragma: no cover - compiled
         for j in range(n):
             s += B[i, j] * H[j]
         BH[i] = s
-    for i in range(n):
-        for j in range(n):
-            P[i, j] = B[i, j] - BH[i] * K[j] + K[i] * r * K[j]
-    for i in range(n):
-        for j in range(i + 1, n):
-            s = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = s
-            P[j, i] = s
+    _joseph_finish(P, B, BH, K, r)
     return e, f
 
 
