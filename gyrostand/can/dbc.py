@@ -19,6 +19,7 @@ from pathlib import Path
 import cantools
 from cantools.database.can import Database, Message
 
+from gyrostand.can.logread import EXTENDED_KEY_BIT
 from gyrostand.errors import CanEdgeError
 
 __all__ = [
@@ -33,9 +34,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Bit added to a 29-bit arbitration id in :func:`frame_key` to mark an extended frame, so
-#: standard 0x100 and extended 0x100 are different keys of one int-keyed dict.
-EXTENDED_KEY_BIT = 1 << 29
 
 
 def frame_key(arbitration_id: int, is_extended: bool) -> int:

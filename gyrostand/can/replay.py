@@ -1,12 +1,15 @@
 """Replay of recorded logs through the live receive path.
 
-:func:`read_log` opens anything :class:`can.LogReader` reads (``.blf``, ``.asc``, ``.csv``,
-candump ``.log``, ``.trc``, ``.mf4`` when asammdf is installed); ASC is read with absolute
-timestamps (note: python-can 4.6's ASC *writer* prints the start time's milliseconds
-unpadded, so ASC files it wrote can be off by up to 0.99 s in absolute time; BLF is exact). :func:`replay` hands each frame to the very listeners a live run attaches to
-its Notifier and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the
-bins the live run gave. All timing comes from frame timestamps; ``realtime=True`` only
-paces delivery (sleeping to frame time / ``speed``), it never changes the data.
+Logs are read by :mod:`gyrostand.can.logread` (anything :class:`can.LogReader` reads).
+:func:`replay` hands each frame to the very listeners a live run attaches to its Notifier
+and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the bins the live
+run gave. All timing comes from frame timestamps; ``realtime=True`` only paces delivery
+(sleeping to frame time / ``speed``), it never changes the data.
+
+Log files replayed as fast as possible are parsed in a reader process
+(:class:`~gyrostand.can.logread.ReaderProcess`) while this process decodes, bins and
+estimates: the frames reach the listener's per-frame steps in the same order and the
+pumps fall after the same frames, so the bins are identical either way (tested).
 """
 
 from __future__ import annotations
@@ -20,48 +23,15 @@ import can
 
 from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
-from gyrostand.errors import CanEdgeError
+from gyrostand.can.logread import ReaderProcess, read_log, read_logs
 
-__all__ = ["read_log", "read_logs", "paced", "replay"]
+__all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES"]
+
+#: log files (in total) at least this large are parsed in a reader process when
+#: ``parallel`` is None; below it the process start (~0.2 s) is not worth it
+PARALLEL_MIN_BYTES = 1 << 20
 
 log = logging.getLogger(__name__)
-
-
-def read_log(path: str | Path) -> Iterator[can.Message]:
-    """Frames of a log file, in file order. Raises :class:`CanEdgeError` naming the file.
-
-    A BLF whose last object is torn (the recording process was killed while appending, or
-    the disk filled up) is read up to the tear, with a warning: python-can's reader
-    raises there, after the last complete frame. Damage anywhere else is an error.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise CanEdgeError(f"{path}: log file not found")
-    kwargs = {"relative_timestamp": False} if path.suffix.lower() == ".asc" else {}
-    try:
-        reader = can.LogReader(path, **kwargs)
-    except Exception as exc:
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
-    try:
-        yield from reader
-    except Exception as exc:
-        f = getattr(reader, "file", None)
-        try:
-            at_end = f is not None and not f.closed and f.tell() >= path.stat().st_size
-        except (OSError, ValueError):
-            at_end = False
-        if not (at_end and path.suffix.lower() == ".blf"):
-            raise CanEdgeError(f"{path}: corrupt CAN log: {exc}") from exc
-        log.warning("%s: torn last object ignored (the recording stopped while writing "
-                    "it): %s", path, exc or type(exc).__name__)
-    finally:
-        reader.stop()
-
-
-def read_logs(paths: Iterable[str | Path]) -> Iterator[can.Message]:
-    """The frames of several logs (e.g. a resumed run's segments), one after the other."""
-    for p in paths:
-        yield from read_log(p)
 
 
 def paced(messages: Iterable[can.Message], speed: float = 1.0,
@@ -81,23 +51,37 @@ def paced(messages: Iterable[can.Message], speed: float = 1.0,
         yield msg
 
 
-def replay(messages: Iterable[can.Message] | str | Path, ingest: Ingest,
-           listeners: Sequence[can.Listener] = (), *, realtime: bool = False,
-           speed: float = 1.0, pump_every: int = 1024) -> Iterator[list[Bin]]:
-    """Feed frames (or a log file's frames) to ``ingest.listener`` and ``listeners``;
-    yield the bins that close, batch by batch, and at the end the flushed last bins.
+def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
+           ingest: Ingest, listeners: Sequence[can.Listener] = (), *,
+           realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
+           parallel: bool | None = None) -> Iterator[list[Bin]]:
+    """Feed frames (or the frames of a log file, or of several read one after the other)
+    to ``ingest.listener`` and ``listeners``; yield the bins that close, batch by batch,
+    and at the end the flushed last bins.
 
     ``pump_every`` frames between pumps; the listener's FIFO must hold that many frames'
-    samples (the default fits the default capacity).
+    samples (the default fits the default capacity). ``parallel``: parse log files in a
+    reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES`; never with
+    ``realtime`` or extra ``listeners``, which take :class:`can.Message` objects).
     """
+    paths: list[Path] | None = None
     if isinstance(messages, (str, Path)):
-        messages = read_log(messages)
+        paths = [Path(messages)]
+    elif isinstance(messages, (list, tuple)) and messages and all(
+            isinstance(p, (str, Path)) for p in messages):
+        paths = [Path(p) for p in messages]
+    if paths is not None and not realtime and not listeners and parallel is not False:
+        if parallel or sum(p.stat().st_size for p in paths if p.is_file()) >= PARALLEL_MIN_BYTES:
+            yield from _replay_parallel(paths, ingest, pump_every)
+            return
+    if paths is not None:
+        messages = read_logs(paths)
     if realtime:
-        messages = paced(messages, speed)
+        messages = paced(messages, speed)  # type: ignore[arg-type]
     receivers = [ingest.listener.on_message_received]
     receivers += [lst.on_message_received for lst in listeners]
     n = 0
-    for msg in messages:
+    for msg in messages:  # type: ignore[union-attr]
         for receive in receivers:
             receive(msg)
         n += 1
@@ -109,3 +93,21 @@ def replay(messages: Iterable[can.Message] | str | Path, ingest: Ingest,
     if bins:
         yield bins
     log.info("replayed %d frames", n)
+
+
+def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int
+                     ) -> Iterator[list[Bin]]:
+    """:func:`replay` of log files parsed by a reader process: batches of ``pump_every``
+    frames, each received then pumped, as the serial loop pumps every ``pump_every``."""
+    reader = ReaderProcess(paths, batch=pump_every)
+    receive, pump = ingest.listener.receive_frames, ingest.pump
+    for frames in reader:
+        receive(frames)
+        if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
+            bins = pump()
+            if bins:
+                yield bins
+    bins = ingest.finish()
+    if bins:
+        yield bins
+    log.info("replayed %d frames (log parsed in a reader process)", reader.frames)

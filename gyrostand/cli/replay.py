@@ -1,5 +1,6 @@
-"""``gyrostand replay CONFIG LOG [LOG ...] [--out DIR] [--realtime] [--speed X]``; a LOG
-that is a run folder stands for its raw segments (``raw.blf``, ``raw-2.blf``, ...)."""
+"""``gyrostand replay CONFIG LOG [LOG ...] [--out DIR] [--realtime] [--speed X]
+[--reader auto|process|inline]``; a LOG that is a run folder stands for its raw segments
+(``raw.blf``, ``raw-2.blf``, ...)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,10 @@ def add_parser(sub: Any) -> None:
                    help="parent folder of the run folder (default: session.output)")
     p.add_argument("--realtime", action="store_true", help="pace frames to their timestamps")
     p.add_argument("--speed", type=float, default=1.0, help="with --realtime: x real time")
+    p.add_argument("--reader", choices=("auto", "process", "inline"), default="auto",
+                   help="where the log is parsed: 'process', a reader process beside the "
+                        "decoding (uses a second core); 'inline', in this process; 'auto' "
+                        "(default): a process for logs of 1 MiB or more, unless --realtime")
     p.set_defaults(func=run)
 
 
@@ -45,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             logs.append(p)
     outcome = run_replay(cfg, logs[0] if len(logs) == 1 else logs, out=args.out,
-                         realtime=args.realtime, speed=args.speed)
+                         realtime=args.realtime, speed=args.speed,
+                         parallel={"auto": None, "process": True, "inline": False}[args.reader])
     print_outcome(outcome, sys.stdout)
     return 0

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
-from ..can.replay import read_logs, replay
+from ..can.replay import replay
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
@@ -37,16 +37,17 @@ log = logging.getLogger(__name__)
 def run_replay(cfg: SessionConfig,
                log_path: str | Path | Sequence[str | Path] | Iterable[can.Message], *,
                out: str | Path | None = None, realtime: bool = False, speed: float = 1.0,
-               pump_every: int = 1024,
+               pump_every: int = 1024, parallel: bool | None = None,
                truths: dict[str, dict[str, float]] | None = None) -> RunOutcome:
     """Replay ``log_path`` (any format python-can reads; a list of such files, read one
     after the other, e.g. the raw segments of a resumed run; or frames) through the
-    pipeline, as fast as possible unless ``realtime`` (paced to frame time / ``speed``)."""
-    source: Iterable[can.Message] | str | Path
+    pipeline, as fast as possible unless ``realtime`` (paced to frame time / ``speed``).
+    ``parallel``: parse log files in a reader process (see :func:`~gyrostand.can.replay.replay`)."""
+    source: Iterable[can.Message] | str | Path | list[str | Path]
     if isinstance(log_path, list | tuple) and all(isinstance(p, str | Path)
                                                   for p in log_path):
         what = " + ".join(str(p) for p in log_path)
-        source = read_logs(log_path)
+        source = list(log_path)
     else:
         what = str(log_path) if isinstance(log_path, str | Path) else "<frames>"
         source = log_path  # type: ignore[assignment]
@@ -56,7 +57,7 @@ def run_replay(cfg: SessionConfig,
         pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}")
         log.info("replaying %s into %s", what, run_dir)
         for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
-                           pump_every=pump_every):
+                           pump_every=pump_every, parallel=parallel):
             pipe.step(bins)
         pipe.step([])
         return pipe.finish("end of log", truths=truths)

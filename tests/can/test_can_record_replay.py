@@ -132,3 +132,73 @@ def test_replay_errors_and_pacing(tmp_path):
     msgs = [can.Message(timestamp=T0 + t) for t in (0.0, 0.5, 2.0)]
     out = list(paced(msgs, speed=2.0, clock=lambda: now[0], sleep=sleep))
     assert out == msgs and slept == pytest.approx([0.25, 0.75])
+
+
+# -- the reader process (replay of large logs parses them beside the decoding) -----------
+
+def _batches(source, ingest, **kw):
+    return [_key(batch) for batch in replay(source, ingest, pump_every=100, **kw)]
+
+
+def test_reader_process_replay_equals_the_in_process_replay(triad_cfg, tmp_path):
+    frames = _sim(triad_cfg, n=30)  # bad frames of every kind mixed in
+    a, b = tmp_path / "a.blf", tmp_path / "b.blf"
+    write_log(a, frames[:1500])
+    write_log(b, frames[1500:])
+    serial, parallel = make_ingest(triad_cfg), make_ingest(triad_cfg)
+    want = _batches([a, b], serial, parallel=False)
+    got = _batches([a, b], parallel, parallel=True)
+    assert got == want  # the same bins, closed in the same batches
+    assert parallel.listener.stats() == serial.listener.stats()
+    st = serial.listener.stats()
+    assert st.received == len(frames) and st.rejected_total > 50 and st.counter_jumps > 0
+    assert sum(len(x) for x in want) > 3 * 25
+
+
+def test_reader_process_stops_when_the_consumer_does(demo_cfg, tmp_path):
+    from gyrostand.can.logread import ReaderProcess
+
+    path = tmp_path / "sim.blf"
+    n = write_log(path, _sim(demo_cfg, n=60, drift_rate=200))
+    reader = ReaderProcess([path], batch=64)
+    it = iter(reader)
+    first = next(it)
+    assert len(first) == 64 and reader.returncode is None
+    it.close()  # e.g. the replay loop raised
+    assert reader.returncode is not None
+    full = ReaderProcess([path], batch=1000)
+    sizes = [len(b) for b in full]
+    assert sum(sizes) == n == full.frames and full.returncode == 0
+    assert all(s == 1000 for s in sizes[:-1])
+
+
+def test_reader_process_reports_errors_with_the_file(demo_cfg, tmp_path, caplog):
+    from gyrostand.can.logread import ReaderProcess
+
+    with pytest.raises(CanEdgeError, match="nope.blf: log file not found"):
+        list(ReaderProcess([tmp_path / "nope.blf"]))
+    path = tmp_path / "sim.blf"
+    frames = _sim(demo_cfg, n=30)
+    with Recorder(path) as rec:
+        rec._writer.max_container_size = 2048  # many objects, as a long recording has
+        for f in frames:
+            rec.on_message_received(f)
+    whole = path.read_bytes()
+    for cut in range(700, 800):  # torn last object: read up to it, with a warning
+        path.write_bytes(whole[:-cut])
+        caplog.clear()
+        want = [m.timestamp for m in read_log(path)]
+        if "torn last object ignored" in caplog.text:  # (some cuts end cleanly)
+            break
+    caplog.clear()
+    got = [f for b in ReaderProcess([path], batch=50) for f in b]
+    assert 0 < len(got) < len(frames)
+    assert [f[0] for f in got] == want
+    assert "torn last object ignored" in caplog.text  # logged here, by the reader
+    bad = bytearray(whole)
+    bad[len(bad) // 2: len(bad) // 2 + 64] = b"X" * 64  # damage inside: an error
+    path.write_bytes(bytes(bad))
+    reader = ReaderProcess([path], batch=50)
+    with pytest.raises(CanEdgeError, match=r"sim\.blf: corrupt CAN log|sim\.blf: cannot read"):
+        for _ in reader:
+            pass

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from sessionhelpers import DEMO, ROOT, write_cfg_yaml
 
@@ -32,6 +33,16 @@ def test_simulate_to_a_log_then_replay_it(tmp_path, capsys):
                   if line.startswith("result:"))
     doc = json.loads(open(result).read())
     assert doc["gyros"]["az"]["bins"] == 101 and doc["source"] == f"replay of {log}"
+    # the same log parsed by a reader process: the same samples, the same fits
+    assert main(["replay", str(cfg), str(log), "--out", str(tmp_path / "rep2"),
+                 "--reader", "process"]) == 0
+    out2 = capsys.readouterr().out
+    result2 = next(line.split(None, 1)[1] for line in out2.splitlines()
+                   if line.startswith("result:"))
+    doc2 = json.loads(open(result2).read())
+    assert doc2["gyros"]["az"]["fits"] == doc["gyros"]["az"]["fits"]
+    assert (Path(result2).parent / "az" / "samples.csv").read_bytes() == \
+        (Path(result).parent / "az" / "samples.csv").read_bytes()
 
 
 def test_demo_runs_from_another_folder(tmp_path, capsys, monkeypatch):

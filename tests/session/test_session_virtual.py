@@ -88,9 +88,10 @@ def test_heartbeat_counts_and_files(live):
     assert doc["stats"]["commands"]["acked"] == 1
 
 
-def test_replay_of_the_recorded_blf_reproduces_the_run(live, tmp_path):
+@pytest.mark.parametrize("parallel", [False, True], ids=["in-process", "reader-process"])
+def test_replay_of_the_recorded_blf_reproduces_the_run(live, tmp_path, parallel):
     cfg, outcome, _, _ = live
-    rep = run_replay(cfg, outcome.run_dir / "raw.blf", out=tmp_path)
+    rep = run_replay(cfg, outcome.run_dir / "raw.blf", out=tmp_path, parallel=parallel)
     a = (outcome.run_dir / "az" / "samples.csv").read_bytes()
     assert (rep.run_dir / "az" / "samples.csv").read_bytes() == a
     live_doc = json.loads(outcome.result_json.read_text())
