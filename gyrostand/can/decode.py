@@ -20,17 +20,19 @@ from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import can
 from cantools.database.can import Database
 
-try:
-    from cantools.database.utils import decode_data as _decode_data
-except ImportError:  # another cantools: decode_simple is used
-    _decode_data = None
-
 from gyrostand.can.dbc import MessageRef, SignalRef, frame_key
 from gyrostand.can.logread import ERROR_FRAME, REMOTE_FRAME, Frame, frame_fields
+
+try:
+    from cantools.database.utils import decode_data as _cantools_decode_data
+except ImportError:  # another cantools: decode_simple is used
+    _cantools_decode_data = None  # type: ignore[assignment]
+_decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
            "Sample", "Command", "MALFORMED", "Frame", "frame_fields", "ERROR_FRAME",
@@ -138,15 +140,16 @@ def _decoder(message) -> Callable[[bytes | bytearray], dict]:
     def public(data):
         return message.decode_simple(data, False)
 
-    codecs = getattr(message, "_codecs", None)
+    codecs: Any = getattr(message, "_codecs", None)
     entry = getattr(message, "_decode", None)
     fast = public
+    plain = _decode_data
     try:
-        if not codecs["multiplexers"] and callable(_decode_data):
+        if not codecs["multiplexers"] and plain is not None:
             length, signals, formats = message.length, codecs["signals"], codecs["formats"]
 
             def fast(data):
-                return _decode_data(data, length, signals, formats, False, True, False, True)
+                return plain(data, length, signals, formats, False, True, False, True)
         elif callable(entry):
             def fast(data):
                 return entry(codecs, data, False, True, False, True)

@@ -188,9 +188,15 @@ class ReaderProcess:
 
     def __iter__(self) -> Iterator[list[Frame]]:
         what = " + ".join(self.paths)
+        # the child imports this very gyrostand, installed or not (a source checkout)
+        env = dict(os.environ)
+        here = str(Path(__file__).resolve().parents[2])
+        env["PYTHONPATH"] = os.pathsep.join([here] + ([env["PYTHONPATH"]]
+                                                      if env.get("PYTHONPATH") else []))
         proc = subprocess.Popen(
-            [sys.executable, "-m", "gyrostand.can.logread", "--batch", str(self.batch), "--", *self.paths],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
+            [sys.executable, "-m", "gyrostand.can.logread", "--batch", str(self.batch),
+             "--", *self.paths],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, env=env)
         assert proc.stdout is not None
         _deepen(proc.stdout.fileno())
         read = proc.stdout.read

@@ -74,14 +74,14 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
         if parallel or sum(p.stat().st_size for p in paths if p.is_file()) >= PARALLEL_MIN_BYTES:
             yield from _replay_parallel(paths, ingest, pump_every)
             return
-    if paths is not None:
-        messages = read_logs(paths)
+    frames: Iterable[can.Message] = (read_logs(paths) if paths is not None
+                                     else messages)  # type: ignore[assignment]
     if realtime:
-        messages = paced(messages, speed)  # type: ignore[arg-type]
+        frames = paced(frames, speed)
     receivers = [ingest.listener.on_message_received]
     receivers += [lst.on_message_received for lst in listeners]
     n = 0
-    for msg in messages:  # type: ignore[union-attr]
+    for msg in frames:
         for receive in receivers:
             receive(msg)
         n += 1
