@@ -165,11 +165,15 @@ class ReconnectConfig:
     """What the daemon does when the bus goes away (e.g. a ``remote`` server stops):
     retry opening it, waiting ``first_delay`` s, then twice as long each time up to
     ``max_delay`` s; after ``max_time`` s without a bus it stops in state ``fault``
-    (0: at once)."""
+    (0: at once). ``at_start``: s to keep trying, with the same backoff, when the bus
+    cannot be opened at startup (an adapter not plugged in yet, a server not up yet;
+    default 0: fail at once); a bus that can never open (unknown interface, a driver
+    that is not installed, bad arguments) fails at once anyway."""
 
     max_time: float = 600.0
     first_delay: float = 0.25
     max_delay: float = 10.0
+    at_start: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -378,12 +382,14 @@ class _Parser:
         )
 
     def reconnect(self, value: Any) -> ReconnectConfig:
-        m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay"))
+        m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay",
+                                                  "at_start"))
         max_time = self.number(m.get("max_time", 600.0), "reconnect.max_time", lo=0.0)
         first = self.number(m.get("first_delay", 0.25), "reconnect.first_delay", lo=0.0,
                             lo_open=True)
         most = self.number(m.get("max_delay", 10.0), "reconnect.max_delay", lo=first)
-        return ReconnectConfig(max_time, first, most)
+        at_start = self.number(m.get("at_start", 0.0), "reconnect.at_start", lo=0.0)
+        return ReconnectConfig(max_time, first, most, at_start)
 
     def sampling(self, value: Any) -> SamplingConfig:
         m = self.mapping(value, "sampling", (), ("dt", "epoch", "buffer", "max_gap"))

@@ -147,6 +147,58 @@ class BusLink:
             self.bus = None
 
 
+def _permanent(exc: CanEdgeError) -> bool:
+    """A bus that no retry can open: unknown interface, driver not installed, bad args."""
+    return isinstance(exc.__cause__, (can.CanInterfaceNotImplementedError, ImportError,
+                                      TypeError, ValueError))
+
+
+def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
+                      handle_signals: bool = True) -> can.BusABC:
+    """Open ``cfg.bus``; while it cannot be opened, retry with backoff
+    (``reconnect.first_delay`` doubling up to ``max_delay``) for ``reconnect.at_start`` s.
+    Raises :class:`CanEdgeError` (the last failure, with the time waited) when the time is
+    up, at once for a bus that can never open, or when ``stop`` is set / SIGINT or
+    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting."""
+    rc = cfg.reconnect
+    t0 = time.monotonic()
+    delay, attempts = rc.first_delay, 0
+    stop = stop or threading.Event()
+    old: dict[signal.Signals, Any] = {}
+    try:
+        while True:
+            attempts += 1
+            try:
+                bus = open_bus(cfg.bus)
+            except CanEdgeError as exc:
+                waited = time.monotonic() - t0
+                if _permanent(exc) or rc.at_start <= 0:
+                    raise
+                if waited >= rc.at_start or stop.is_set():
+                    why = "stopped" if stop.is_set() else "giving up"
+                    raise CanEdgeError(f"{exc} ({why} after {waited:.1f} s and {attempts} "
+                                       f"attempts, reconnect.at_start {rc.at_start:g} s)"
+                                       ) from exc.__cause__
+                if attempts == 1:
+                    log.warning("%s; waiting for the bus, up to %g s (reconnect.at_start)",
+                                exc, rc.at_start)
+                    if handle_signals and threading.current_thread() is threading.main_thread():
+                        for sig in (signal.SIGINT, signal.SIGTERM):
+                            old[sig] = signal.signal(sig, lambda *_: stop.set())
+                else:
+                    log.info("bus not open yet, attempt %d: %s", attempts, exc)
+                stop.wait(max(0.0, min(delay, rc.at_start - waited)))
+                delay = min(delay * 2, rc.max_delay)
+            else:
+                if attempts > 1:
+                    log.warning("bus opened after %.1f s (%d attempts)",
+                                time.monotonic() - t0, attempts)
+                return bus
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
 def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
              duration: float | None = None, start_idle: bool = False,
              on_ready: Callable[[Path], None] | None = None,
@@ -172,7 +224,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             raise
         raw_path = state.segment
     try:
-        bus = open_bus(cfg.bus)
+        bus = open_bus_at_start(cfg, stop_event, handle_signals)
     except BaseException:
         if lock is not None:
             lock.release()

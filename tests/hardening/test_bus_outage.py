@@ -146,3 +146,65 @@ def test_remote_server_restart_is_an_outage_with_a_gap(tmp_path):
 @pytest.mark.slow
 def test_three_outages_of_growing_length(tmp_path):
     _outages(tmp_path, [0.5, 3.0, 8.0])
+
+
+def test_daemon_waits_for_a_bus_that_is_not_up_yet(tmp_path):
+    """``reconnect.at_start``: the server comes up 2 s after the daemon started; the
+    daemon retries with backoff, opens the bus, runs, and stops on a command."""
+    srv = RemoteServer()  # its port is chosen, nothing listens there yet
+    cfg_path = write_config(
+        tmp_path / "late.yaml", tmp_path / "runs",
+        {"interface": "remote", "channel": srv.url, "preserve_timestamps": True},
+        sim={"duration": 20.0, "rates": {"drift": 20, "temperature": 10}},
+        reconnect={"at_start": 60, "first_delay": 0.1, "max_delay": 0.4})
+    cfg = load_config(cfg_path)
+    t0 = time.monotonic()
+    daemon = Daemon(cfg_path, "--out", str(tmp_path / "runs"))
+    stand = None
+    try:
+        time.sleep(2.0)
+        assert daemon.proc.poll() is None  # still waiting, not failed
+        srv.start()
+        run_dir = daemon.run_dir(daemon.wait_for("ready: ", timeout=30))
+        assert time.monotonic() - t0 >= 2.0
+        stand = can.Bus(interface="remote", channel=srv.url, preserve_timestamps=True)
+        frames = list(simulated_frames(cfg))
+        send_paced(stand, frames, SPEED)
+        stand.send(FrameEncoder(cfg.db).command_frame(
+            cfg.responses.command, "stop", 1, 1, timestamp=frames[-1].timestamp + 0.01))
+        rc, err = daemon.finish()
+    finally:
+        daemon.close()
+        if stand is not None:
+            stand.shutdown()
+        srv.stop()
+    assert rc == 0, err
+    assert "waiting for the bus, up to 60 s (reconnect.at_start)" in err
+    opened = re.search(r"bus opened after ([\d.]+) s \((\d+) attempts\)", err)
+    # (the daemon's own start-up takes part of the 2 s)
+    assert opened and float(opened.group(1)) >= 1.0 and int(opened.group(2)) >= 4, err
+    doc = json.loads((run_dir / "result.json").read_text())
+    assert doc["gyros"]["az"]["bins"] >= 19
+
+
+def test_start_without_a_bus_gives_up_after_at_start_and_at_once_when_hopeless(tmp_path):
+    srv = RemoteServer()  # never started
+    cfg_path = write_config(
+        tmp_path / "none.yaml", tmp_path / "runs",
+        {"interface": "remote", "channel": srv.url},
+        reconnect={"at_start": 1.5, "first_delay": 0.1, "max_delay": 0.4})
+    t0 = time.monotonic()
+    rc, err = Daemon(cfg_path, "--out", str(tmp_path / "runs")).finish(60)
+    assert rc == 2 and time.monotonic() - t0 >= 1.5
+    assert "cannot open CAN bus (interface='remote'" in err
+    assert re.search(r"giving up after 1\.\d s and \d+ attempts, reconnect\.at_start 1\.5 s",
+                     err), err
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+    # an interface python-can does not have never opens: no waiting
+    cfg_path = write_config(
+        tmp_path / "bad.yaml", tmp_path / "runs", {"interface": "no_such_if", "channel": "x"},
+        reconnect={"at_start": 60})
+    t0 = time.monotonic()
+    rc, err = Daemon(cfg_path, "--out", str(tmp_path / "runs")).finish(60)
+    assert rc == 2 and time.monotonic() - t0 < 20
+    assert "Unknown interface type" in err and "waiting" not in err

@@ -71,6 +71,7 @@ BAD = [
      "gyros[0].temperature.message"),
     ("bad command rate", ("responses.command_rate", -1), "responses.command_rate: must be >"),
     ("bad reconnect", ("reconnect", {"max_time": "long"}), "reconnect.max_time"),
+    ("negative at_start", ("reconnect", {"at_start": -1}), "reconnect.at_start: must be >="),
     ("unwritable output", ("session.output", "__FILE__/runs"), "__FILE__"),
 ]
 
