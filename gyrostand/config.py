@@ -221,6 +221,9 @@ class SessionConfig:
     simulate: SimulateConfig | None = None
     db: Any = field(default=None, repr=False, compare=False)
     reconnect: ReconnectConfig = field(default_factory=ReconnectConfig)
+    #: live runs: each once-a-second acknowledgement is fdatasync'ed (raw log first,
+    #: then samples and estimates), so it survives a power cut, not only a crash
+    fsync: bool = True
 
     def gyro(self, name: str) -> GyroConfig:
         for g in self.gyros:
@@ -341,11 +344,12 @@ class _Parser:
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
                            ("sampling", "responses", "simulate", "reconnect"))
-        sess = self.mapping(top["session"], "session", ("name",), ("output",))
+        sess = self.mapping(top["session"], "session", ("name",), ("output", "fsync"))
         name = self.string(sess["name"], "session.name")
         if not _NAME_RE.match(name):
             raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
+        fsync = bool(self.boolean(sess.get("fsync", True), "session.fsync"))
         bus = top["bus"]
         if not isinstance(bus, Mapping) or not bus:
             raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
@@ -375,7 +379,7 @@ class _Parser:
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
         reconnect = self.reconnect(top.get("reconnect") or {})
         return SessionConfig(
-            path=Path(self.source), name=name, output=output,
+            path=Path(self.source), name=name, output=output, fsync=fsync,
             bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
             reconnect=reconnect,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -218,7 +219,8 @@ class SamplesWriter:
 
     def __init__(self, run_dir: str | Path, gyros: Sequence[str], *,
                  before_flush: Callable[[], None] | None = None, max_pending: int = 4096,
-                 append: bool = False) -> None:
+                 append: bool = False, sync: bool = False) -> None:
+        self.sync = sync  # fdatasync each file after writing it (see flush)
         self.paths: dict[str, Path] = {}
         self._files: dict[str, TextIO] = {}
         self._pending: dict[str, list[str]] = {}
@@ -245,7 +247,8 @@ class SamplesWriter:
             self.flush()
 
     def flush(self) -> None:
-        """``before_flush()``, then every pending row to disk (one write per file).
+        """``before_flush()``, then every pending row to disk (one write per file; with
+        ``sync``, each file is fdatasync'ed after its write).
         Raises :class:`~gyrostand.errors.OutputError` naming the file that failed."""
         if self.before_flush is not None:
             self.before_flush()
@@ -256,6 +259,8 @@ class SamplesWriter:
             try:
                 f.write("".join(rows))
                 f.flush()
+                if self.sync:
+                    getattr(os, "fdatasync", os.fsync)(f.fileno())
             except OSError as exc:
                 raise OutputError(f"{self.paths[name]}: cannot write: "
                                   f"{exc.strerror or exc}") from exc

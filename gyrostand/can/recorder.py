@@ -61,6 +61,7 @@ class CommitFile:
         self._pos = 0
         self._broken: OSError | None = None
         self.closed = False
+        self.sync_on_close = False  # fdatasync before closing
 
     def seekable(self) -> bool:
         return True
@@ -120,6 +121,8 @@ class CommitFile:
         try:
             if self._broken is None:
                 self.flush()
+                if self.sync_on_close:
+                    _datasync(self._fd)
         finally:
             self.closed = True
             os.close(self._fd)
@@ -148,16 +151,24 @@ class FlushingBLFWriter(can.BLFWriter):
         self.file.flush()  # commit: header in place, then the container(s), one write
 
 
+def _datasync(fd: int) -> None:
+    """``fdatasync`` where the OS has it (Linux), else ``fsync``."""
+    getattr(os, "fdatasync", os.fsync)(fd)
+
+
 class Recorder(can.Listener):
     """A listener that writes every frame to ``path`` (suffix picks the format)."""
 
-    def __init__(self, path: str | Path, flush_interval: float = 1.0) -> None:
+    def __init__(self, path: str | Path, flush_interval: float = 1.0, *,
+                 durable: bool = False) -> None:
+        """``durable``: :meth:`stop` fdatasyncs a BLF before closing it (see :meth:`sync`)."""
         self.path = Path(path)
         self.flush_interval = float(flush_interval)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             if self.path.suffix.lower() == ".blf":
                 self._writer: can.Listener = FlushingBLFWriter(self.path)
+                self._writer.file.sync_on_close = durable  # type: ignore[union-attr]
             else:
                 self._writer = can.Logger(self.path)
         except Exception as exc:
@@ -225,6 +236,22 @@ class Recorder(can.Listener):
                     self._flush_locked()
                 except OSError as exc:
                     self._fail(exc)
+
+    def sync(self) -> None:
+        """:meth:`flush`, then ``fdatasync`` the file: what was received is on the disk
+        itself, not only in the OS's cache (survives a power cut). A failure is kept in
+        :attr:`failed`, not raised."""
+        with self._lock:
+            if self._stopped or self.failed is not None:
+                return
+            try:
+                self._flush_locked()
+                f = getattr(self._writer, "file", None)
+                fd = f._fd if isinstance(f, CommitFile) else f.fileno() if f else None
+                if fd is not None:
+                    _datasync(fd)
+            except OSError as exc:
+                self._fail(exc)
 
     def stop(self) -> None:
         """Flush and close the file; later frames are ignored."""

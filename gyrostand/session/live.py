@@ -247,15 +247,15 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     sink = BusSink(None)
     link: BusLink | None = None
     try:
-        recorder = Recorder(raw_path, flush_interval=1.0)
+        recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync)
 
         def commit_raw() -> None:  # before any bin reaches samples.csv
-            recorder.flush()
+            recorder.sync() if cfg.fsync else recorder.flush()
             if recorder.failed is not None:
                 raise recorder.failed
 
         pipe = Pipeline(cfg, run_dir, sink, source="live", start_idle=start_idle,
-                        before_flush=commit_raw, resume=state)
+                        before_flush=commit_raw, resume=state, sync=cfg.fsync)
         if handle_signals and threading.current_thread() is threading.main_thread():
             def on_signal(signum: int, _frame: Any) -> None:
                 signalled.append(signal.Signals(signum).name)

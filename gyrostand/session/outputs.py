@@ -198,9 +198,11 @@ class EstimatesWriter:
     online estimates after that bin (NaN written ``nan`` while unknown)."""
 
     def __init__(self, path: Path, identifiers: Sequence[str],
-                 param_names: Sequence[str], *, append: bool = False) -> None:
+                 param_names: Sequence[str], *, append: bool = False,
+                 sync: bool = False) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
+        self.sync = sync  # fdatasync at each flush
         self.param_names = tuple(param_names)
         fresh = not (append and path.is_file() and path.stat().st_size > 0)
         self._f: TextIO = path.open("w" if fresh else "a", newline="", encoding="utf-8")
@@ -223,6 +225,8 @@ class EstimatesWriter:
     def flush(self) -> None:
         try:
             self._f.flush()
+            if self.sync:
+                getattr(os, "fdatasync", os.fsync)(self._f.fileno())
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 

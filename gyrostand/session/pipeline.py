@@ -173,7 +173,7 @@ class Pipeline:
                  source: str = "live", start_idle: bool = False,
                  wall: Callable[[], float] = time.time,
                  before_flush: Callable[[], None] | None = None,
-                 resume: ResumeState | None = None) -> None:
+                 resume: ResumeState | None = None, sync: bool = False) -> None:
         self.cfg, self.run_dir, self.sink, self.source, self.wall = cfg, run_dir, sink, \
             source, wall
         self.channels = ChannelMap.from_config(cfg)
@@ -186,12 +186,12 @@ class Pipeline:
         self.encoder = FrameEncoder(cfg.db)
         self.trackers = {g.name: GyroTracker(g, cfg.sampling.dt) for g in cfg.gyros}
         self.samples = SamplesWriter(run_dir, self.channels.gyros, before_flush=before_flush,
-                                     append=resume is not None)
+                                     append=resume is not None, sync=sync)
         self.estimates = {
             g.name: EstimatesWriter(run_dir / g.name / "estimates.csv",
                                     self.trackers[g.name].identifiers,
                                     self.trackers[g.name].model.param_names,
-                                    append=resume is not None)
+                                    append=resume is not None, sync=sync)
             for g in cfg.gyros}
         self.outages = 0
         self.resumed: dict[str, Any] = {}
