@@ -11,9 +11,11 @@ data frame at or after a whole second) and the first ``GS_RESULT`` frame after i
 It includes the Notifier's receive, decode, the worker's poll interval (2 ms), binning,
 the online LKF and LSQ updates, the estimates CSV row, and encoding + sending the round.
 Two loads: the demo stand (1 gyro, 110 frames/s) and the three-gyro stand paced at a
-saturated 1 Mbit/s bus (9,009 frames/s). Printed: median and p99 (ms) per load.
+saturated 1 Mbit/s bus (9,009 frames/s), each with ``session.fsync`` on (the default: the
+once-a-second acknowledgement fdatasyncs the run files) and off. Printed: median, p99 and
+max (ms) per load and setting.
 
-    .venv/bin/python benchmarks/latency.py [--seconds 30]
+    .venv/bin/python benchmarks/latency.py [--seconds 30] [--repeat 1]
 """
 
 from __future__ import annotations
@@ -40,10 +42,11 @@ from gyrostand.session.offline import simulated_frames
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def config(name: str, out: Path, channel: str, seconds: float):
+def config(name: str, out: Path, channel: str, seconds: float, fsync: bool = True):
     path = ROOT / "configs" / name
     d = copy.deepcopy(yaml.safe_load(path.read_text()))
     d["session"]["output"] = str(out)
+    d["session"]["fsync"] = fsync
     d["bus"] = {"interface": "virtual", "channel": channel}  # stamped at send: wall clock
     d["responses"]["period"] = 1.0
     d["simulate"]["duration"] = float(seconds)
@@ -98,6 +101,8 @@ def measure(cfg, frames, rate: float | None) -> tuple[list[float], int]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=30.0)
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per load and session.fsync setting, interleaved")
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
     for h in logging.getLogger().handlers:
@@ -107,15 +112,17 @@ def main() -> None:
             ("three gyros at 9,009 frames/s", "three-gyros.yaml", 9009.0,
              args.seconds * 9009.0 / 630.0))
     for label, name, rate, sim_seconds in runs:
-        cfg = config(name, out, f"gyrostand-bench-latency-{name}", sim_seconds)
-        frames = list(simulated_frames(cfg))
-        lat, sent = measure(cfg, frames, rate)
-        lat.sort()
-        p99 = lat[min(len(lat) - 1, int(0.99 * len(lat)))]
-        print(f"{label}: {len(lat)} bin closes, {sent} frames; frame-to-result latency "
-              f"median {statistics.median(lat):.2f} ms, p99 {p99:.2f} ms, "
-              f"max {lat[-1]:.2f} ms")
-
+        for rep in range(args.repeat):
+            for fsync in (True, False):
+                cfg = config(name, out, f"gyrostand-bench-latency-{name}-{rep}-{fsync}",
+                             sim_seconds, fsync)
+                frames = list(simulated_frames(cfg))
+                lat, sent = measure(cfg, frames, rate)
+                lat.sort()
+                p99 = lat[min(len(lat) - 1, int(0.99 * len(lat)))]
+                print(f"{label}, session.fsync {str(fsync).lower()}: {len(lat)} bin closes, "
+                      f"{sent} frames; frame-to-result latency median "
+                      f"{statistics.median(lat):.2f} ms, p99 {p99:.2f} ms, max {lat[-1]:.2f} ms")
 
 if __name__ == "__main__":
     main()

@@ -241,17 +241,26 @@ class Recorder(can.Listener):
         """:meth:`flush`, then ``fdatasync`` the file: what was received is on the disk
         itself, not only in the OS's cache (survives a power cut). A failure is kept in
         :attr:`failed`, not raised."""
-        with self._lock:
+        with self._lock:  # the Notifier's thread takes this lock for every frame
             if self._stopped or self.failed is not None:
                 return
             try:
                 self._flush_locked()
                 f = getattr(self._writer, "file", None)
                 fd = f._fd if isinstance(f, CommitFile) else f.fileno() if f else None
-                if fd is not None:
-                    _datasync(fd)
+                fd = os.dup(fd) if fd is not None else None  # stays open if stop() closes
             except OSError as exc:
                 self._fail(exc)
+                return
+        if fd is None:
+            return
+        try:  # outside the lock: frames keep being recorded while the disk catches up
+            _datasync(fd)
+        except OSError as exc:
+            with self._lock:
+                self._fail(exc)
+        finally:
+            os.close(fd)
 
     def stop(self) -> None:
         """Flush and close the file; later frames are ignored."""
