@@ -15,6 +15,7 @@ pumps fall after the same frames, so the bins are identical either way (tested).
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
@@ -61,8 +62,9 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
 
     ``pump_every`` frames between pumps; the listener's FIFO must hold that many frames'
     samples (the default fits the default capacity). ``parallel``: parse log files in a
-    reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES`; never with
-    ``realtime`` or extra ``listeners``, which take :class:`can.Message` objects).
+    reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
+    process may use two CPUs or more; never with ``realtime`` or extra ``listeners``,
+    which take :class:`can.Message` objects).
     """
     paths: list[Path] | None = None
     if isinstance(messages, (str, Path)):
@@ -71,7 +73,8 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
             isinstance(p, (str, Path)) for p in messages):
         paths = [Path(p) for p in messages]
     if paths is not None and not realtime and not listeners and parallel is not False:
-        if parallel or sum(p.stat().st_size for p in paths if p.is_file()) >= PARALLEL_MIN_BYTES:
+        if parallel or (_cores() >= 2 and sum(p.stat().st_size for p in paths if p.is_file())
+                        >= PARALLEL_MIN_BYTES):
             yield from _replay_parallel(paths, ingest, pump_every)
             return
     frames: Iterable[can.Message] = (read_logs(paths) if paths is not None
@@ -93,6 +96,14 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     if bins:
         yield bins
     log.info("replayed %d frames", n)
+
+
+def _cores() -> int:
+    """CPUs this process may run on (a reader process only pays off with two or more)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int

@@ -33,7 +33,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--reader", choices=("auto", "process", "inline"), default="auto",
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "
-                        "(default): a process for logs of 1 MiB or more, unless --realtime")
+                        "(default): a process for logs of 1 MiB or more with 2+ CPUs, unless --realtime")
     p.set_defaults(func=run)
 
 

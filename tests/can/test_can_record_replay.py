@@ -202,3 +202,21 @@ def test_reader_process_reports_errors_with_the_file(demo_cfg, tmp_path, caplog)
     with pytest.raises(CanEdgeError, match=r"sim\.blf: corrupt CAN log|sim\.blf: cannot read"):
         for _ in reader:
             pass
+
+
+@pytest.mark.parametrize("cores,size_limit,expect", [
+    (2, 0, True), (1, 0, False), (2, 1 << 40, False)])
+def test_replay_auto_uses_a_reader_process_for_large_logs_with_two_cores(
+        demo_cfg, tmp_path, monkeypatch, caplog, cores, size_limit, expect):
+    import logging
+
+    from gyrostand.can import replay as replay_mod
+
+    path = tmp_path / "sim.blf"
+    write_log(path, _sim(demo_cfg, n=5))
+    monkeypatch.setattr(replay_mod, "_cores", lambda: cores)
+    monkeypatch.setattr(replay_mod, "PARALLEL_MIN_BYTES", size_limit)
+    with caplog.at_level(logging.INFO, logger="gyrostand.can.replay"):
+        bins = [b for batch in replay(path, make_ingest(demo_cfg)) for b in batch]
+    assert len(bins) >= 5
+    assert ("log parsed in a reader process" in caplog.text) == expect
