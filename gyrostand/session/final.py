@@ -192,6 +192,19 @@ def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[G
     b = stats.get("binner", {})
     lines.append(f"bins {b.get('bins', 0)} (gaps {b.get('gaps', 0)}), late samples "
                  f"{b.get('late', 0)}, refused jumps {b.get('jumps', 0)}")
+    segs = stats.get("segments") or []
+    if len(segs) > 1:  # a resumed run: the counts above are the last segment's
+        tot = stats.get("run_totals", {})
+        td, tb = tot.get("decoder", {}), tot.get("binner", {})
+        lines.append(f"(the counts above are the last segment's) whole run, {len(segs)} "
+                     f"raw segments: frames received {td.get('received', 0)}, decoded "
+                     f"{td.get('decoded', 0)}, rejected {td.get('rejected_total', 0)}; bins "
+                     f"{tb.get('bins', 0)} (gaps {tb.get('gaps', 0)})")
+        for seg in segs:
+            sd = seg.get("decoder", {})
+            lines.append(f"  {seg.get('raw')}: {seg.get('state')}"
+                         f"{' (' + seg['ended_by'] + ')' if seg.get('ended_by') else ''}, "
+                         f"decoded {sd.get('decoded', 0)}, rows {seg.get('rows_written', 0)}")
     for f in finals:
         lines += ["", f"gyro {f.gyro}: model {','.join(f.model.names)}; {f.bins} bins, "
                       f"{f.gaps} gaps, {f.observed} observed", ""]

@@ -52,7 +52,14 @@ from ..can.bus import open_bus
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
-from .outputs import RunLock, RunLog, check_writable, make_run_dir
+from .outputs import (
+    RunLock,
+    RunLog,
+    SegmentLog,
+    check_writable,
+    make_run_dir,
+    read_segments,
+)
 from .pipeline import BusSink, Pipeline, RunOutcome
 from .resume import find_resume_dir, prepare_resume
 
@@ -254,8 +261,11 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             if recorder.failed is not None:
                 raise recorder.failed
 
+        segments = SegmentLog(run_dir, raw_path.name,
+                              read_segments(run_dir) if state is not None else ())
         pipe = Pipeline(cfg, run_dir, sink, source="live", start_idle=start_idle,
-                        before_flush=commit_raw, resume=state, sync=cfg.fsync)
+                        before_flush=commit_raw, resume=state, sync=cfg.fsync,
+                        segments=segments)
         if handle_signals and threading.current_thread() is threading.main_thread():
             def on_signal(signum: int, _frame: Any) -> None:
                 signalled.append(signal.Signals(signum).name)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import csv
 import fcntl
+import json
 import logging
 import math
 import os
@@ -32,13 +33,14 @@ import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from ..errors import OutputError
 from .online import OnlineEstimate
 
 __all__ = ["make_run_dir", "RunLog", "EstimatesWriter", "estimate_columns", "write_atomic",
-           "raw_segments", "next_raw_segment", "latest_run_dir", "RunLock", "check_writable"]
+           "raw_segments", "next_raw_segment", "latest_run_dir", "RunLock", "check_writable",
+           "SegmentLog", "read_segments", "SEGMENTS_FILE"]
 
 log = logging.getLogger(__name__)
 
@@ -242,3 +244,80 @@ class EstimatesWriter:
 
 def _num(x: float) -> str:
     return "nan" if math.isnan(x) else f"{x:.9g}"
+
+
+# -- the segments of a live run -----------------------------------------------------------
+
+SEGMENTS_FILE = "segments.json"
+_CRASHED = "crashed: counts as of its last acknowledgement"
+
+
+def read_segments(run_dir: Path) -> list[dict[str, Any]]:
+    """The earlier segments recorded in ``<run>/segments.json`` (for a resumed run); one
+    still marked ``running`` belonged to a daemon that died: it is marked crashed. A
+    missing file gives []; a damaged one is logged and gives [] (the counts are lost,
+    nothing else)."""
+    path = Path(run_dir) / SEGMENTS_FILE
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        segs = [dict(x) for x in doc["segments"]]
+    except FileNotFoundError:
+        return []
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("%s: unreadable (%s); the earlier segments' counts are lost", path, exc)
+        return []
+    for seg in segs:
+        if seg.get("state") == "running":
+            seg["state"], seg["ended_by"] = "crashed", _CRASHED
+    return segs
+
+
+def _add(total: dict[str, Any], part: dict[str, Any]) -> None:
+    for k, v in part.items():
+        if isinstance(v, dict):
+            _add(total.setdefault(k, {}), v)
+        elif isinstance(v, int | float) and not isinstance(v, bool):
+            total[k] = total.get(k, 0) + v
+
+
+class SegmentLog:
+    """``<run>/segments.json``: for each raw segment of a live run (``raw.blf``, then one
+    per resume) its decoder and binner counts and the rows it wrote, rewritten atomically
+    at every acknowledgement, so a daemon that dies leaves its counts as of its last
+    acknowledgement. :meth:`totals` sums the counts over the segments."""
+
+    def __init__(self, run_dir: Path, raw: str, previous: Sequence[dict[str, Any]] = ()
+                 ) -> None:
+        self.path = Path(run_dir) / SEGMENTS_FILE
+        self.previous = [dict(x) for x in previous]
+        self.current: dict[str, Any] = {
+            "raw": raw, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "state": "running"}
+
+    def update(self, stats: dict[str, Any], *, ended_by: str | None = None,
+               extra: dict[str, Any] | None = None) -> None:
+        """Record this segment's counts (:meth:`Pipeline.stats` keys ``decoder``,
+        ``binner``, ``samples``; plus ``extra``, e.g. the recorder's) and write the file;
+        ``ended_by`` marks the segment finished. Raises :class:`OutputError`."""
+        cur = self.current
+        cur["decoder"] = stats["decoder"]
+        cur["binner"] = stats["binner"]
+        cur["rows_written"] = stats["samples"]["rows_written"]
+        cur.update(extra or {})
+        if ended_by is not None:
+            cur["state"], cur["ended_by"] = "finished", ended_by
+            cur["ended"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        write_atomic(self.path, json.dumps({"segments": self.segments()}, indent=1,
+                                           allow_nan=False) + "\n")
+
+    def segments(self) -> list[dict[str, Any]]:
+        return self.previous + [self.current]
+
+    def totals(self) -> dict[str, Any]:
+        """Counts summed over every segment (crashed ones as of their last
+        acknowledgement): ``decoder``, ``binner``, ``rows_written`` and the like."""
+        total: dict[str, Any] = {}
+        for seg in self.segments():
+            _add(total, {k: v for k, v in seg.items() if k not in ("raw", "started",
+                                                                  "ended", "state",
+                                                                  "ended_by")})
+        return total

@@ -60,7 +60,7 @@ from .final import (
     write_result_json,
 )
 from .online import GyroTracker, OnlineEstimate
-from .outputs import EstimatesWriter, write_atomic
+from .outputs import EstimatesWriter, SegmentLog, write_atomic
 from .resume import ResumeState
 
 __all__ = ["Pipeline", "FrameSink", "NullSink", "BusSink", "RunOutcome"]
@@ -173,7 +173,8 @@ class Pipeline:
                  source: str = "live", start_idle: bool = False,
                  wall: Callable[[], float] = time.time,
                  before_flush: Callable[[], None] | None = None,
-                 resume: ResumeState | None = None, sync: bool = False) -> None:
+                 resume: ResumeState | None = None, sync: bool = False,
+                 segments: SegmentLog | None = None) -> None:
         self.cfg, self.run_dir, self.sink, self.source, self.wall = cfg, run_dir, sink, \
             source, wall
         self.channels = ChannelMap.from_config(cfg)
@@ -194,6 +195,7 @@ class Pipeline:
                                     append=resume is not None, sync=sync)
             for g in cfg.gyros}
         self.outages = 0
+        self.segments: SegmentLog | None = None  # set once the counters exist (below)
         self.resumed: dict[str, Any] = {}
         write_provisional_result(run_dir / "result.json", cfg, source, run_dir)
         if resume is not None:
@@ -218,6 +220,7 @@ class Pipeline:
         self._logged_bad: tuple[int, ...] = (0, 0, 0, 0)
         self._logged_t = -math.inf
         self._period, self._beat = r.period, r.heartbeat
+        self.segments = segments  # live runs: per raw segment counts, kept over resumes
 
     def _resume(self, st: ResumeState) -> None:
         """Continue the kept bins: grid, online identifiers fed again, missing estimate
@@ -240,6 +243,8 @@ class Pipeline:
         self.samples.flush()
         for w in self.estimates.values():
             w.flush()
+        if self.segments is not None:
+            self.segments.update(self.stats())
 
     # -- per step ----------------------------------------------------------------------
     def step(self, bins: Sequence[Bin]) -> None:
@@ -487,6 +492,12 @@ class Pipeline:
         stats = self.stats()
         stats.update(extra_stats or {})
         stats["stop_reason"] = reason
+        if self.segments is not None:  # this segment's counts, then the whole run's
+            segs = self.segments
+            attempt(lambda: segs.update(stats, ended_by=reason, extra={
+                k: stats[k] for k in ("recorder", "bus") if k in stats}))
+            stats["segments"] = segs.segments()
+            stats["run_totals"] = segs.totals()
         result = self.run_dir / "result.json"
         report = self.run_dir / "report.txt"
         stats["unwritten"] = unwritten

@@ -190,6 +190,21 @@ def _crash_and_resume(tmp_path: Path, kills: int, duration: float) -> None:
     assert doc["state"] == "finished" and doc["stats"]["stop_reason"] == "stop command"
     assert doc["gyros"]["az"]["bins"] == len(final)
     assert "markov.beta" in doc["gyros"]["az"]["fits"]["ml"]["parameters"]
+    # the counts of every segment, the killed ones as of their last acknowledgement
+    segs = doc["stats"]["segments"]
+    assert [x["raw"] for x in segs] == [p.name for p in raw_segments(run_dir)]
+    assert [x["state"] for x in segs] == ["crashed"] * kills + ["finished"]
+    assert segs[-1]["ended_by"] == "stop command"
+    assert segs[-1]["decoder"] == doc["stats"]["decoder"]
+    per_wall_s = len(frames) / (frames[-1].timestamp - frames[0].timestamp) * SPEED * 2
+    for x, seg in zip(segs, raw_segments(run_dir), strict=True):
+        recorded = sum(1 for _ in read_log(seg))
+        assert abs(x["decoder"]["decoded"] - recorded) <= 1.5 * per_wall_s, (x, recorded)
+    tot = doc["stats"]["run_totals"]
+    assert tot["decoder"]["decoded"] == sum(x["decoder"]["decoded"] for x in segs)
+    assert tot["binner"]["bins"] == sum(x["binner"]["bins"] for x in segs)
+    assert tot["rows_written"] == sum(x["rows_written"] for x in segs)
+    assert "whole run, " in (run_dir / "report.txt").read_text()
     # replaying every segment reproduces the run's rows outside the crash gaps
     rep = run_replay(cfg, raw_segments(run_dir), out=tmp_path / "replay-final")
     replayed = _by_t(_rows(rep.run_dir / "az" / "samples.csv"))
