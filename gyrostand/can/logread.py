@@ -22,6 +22,7 @@ from __future__ import annotations
 import logging
 import os
 import pickle
+import signal
 import struct
 import subprocess
 import sys
@@ -125,14 +126,16 @@ class _PipeHandler(logging.Handler):
 
 
 def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
-    """Body of the reader process: read ``paths`` in order, send frame batches, then end."""
+    """Body of the reader process: read ``paths`` in order, send frame batches, then end.
+    An error is sent after every frame read before it, as the in-process reader would
+    have delivered them."""
     root = logging.getLogger("gyrostand")
     root.addHandler(_PipeHandler(out))
     root.setLevel(logging.INFO)
     n = 0
+    buf: list[Frame] = []
+    append = buf.append
     try:
-        buf: list[Frame] = []
-        append = buf.append
         for msg in read_logs(paths):
             # frame_fields(msg), inlined: this loop is the reader's whole cost
             aid = msg.arbitration_id
@@ -144,17 +147,19 @@ def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
                 n += len(buf)
                 buf = []
                 append = buf.append
-        if buf:
-            _send(out, ("frames", buf))
-            n += len(buf)
-        _send(out, ("end", n))
-    except CanEdgeError as exc:
-        _send(out, ("error", str(exc)))
     except (BrokenPipeError, ConnectionResetError):
         raise
     except Exception as exc:
-        _send(out, ("error", f"{' + '.join(paths)}: cannot read CAN log: "
-                             f"{type(exc).__name__}: {exc}"))
+        error = str(exc) if isinstance(exc, CanEdgeError) else (
+            f"{' + '.join(paths)}: cannot read CAN log: {type(exc).__name__}: {exc}")
+        if buf:
+            _send(out, ("frames", buf))
+        _send(out, ("error", error))
+        return
+    if buf:
+        _send(out, ("frames", buf))
+        n += len(buf)
+    _send(out, ("end", n))
 
 
 def _deepen(fd: int, size: int = 1 << 20) -> None:
@@ -239,6 +244,9 @@ def _main(argv: Sequence[str]) -> int:
     ap.add_argument("logs", nargs="+")
     args = ap.parse_args(argv)
     out = sys.stdout.buffer
+    # Ctrl-C reaches the whole process group: the parent handles it and closes the pipe,
+    # which ends this process (no second traceback from here)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if out.isatty():
         ap.error("standard output is a terminal; this is gyrostand's replay reader")
     try:

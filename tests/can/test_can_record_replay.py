@@ -198,10 +198,16 @@ def test_reader_process_reports_errors_with_the_file(demo_cfg, tmp_path, caplog)
     bad = bytearray(whole)
     bad[len(bad) // 2: len(bad) // 2 + 64] = b"X" * 64  # damage inside: an error
     path.write_bytes(bytes(bad))
-    reader = ReaderProcess([path], batch=50)
-    with pytest.raises(CanEdgeError, match=r"sim\.blf: corrupt CAN log|sim\.blf: cannot read"):
-        for _ in reader:
-            pass
+    inline: list[float] = []
+    with pytest.raises(CanEdgeError, match=r"sim\.blf: corrupt CAN log") as err:
+        for m in read_log(path):
+            inline.append(m.timestamp)
+    got = []
+    with pytest.raises(CanEdgeError) as perr:
+        for b in ReaderProcess([path], batch=50):
+            got += [f[0] for f in b]
+    assert str(perr.value) == str(err.value)
+    assert got == inline and len(inline) > 0  # every frame before the damage, then the error
 
 
 @pytest.mark.parametrize("cores,size_limit,expect", [
