@@ -28,7 +28,8 @@ from typing import NamedTuple, TextIO
 
 from gyrostand.errors import DataError, OutputError
 
-__all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS"]
+__all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS",
+           "datasync"]
 
 log = logging.getLogger(__name__)
 
@@ -205,6 +206,12 @@ class Binner:
         return BinStats(self._bins, self._gaps, self._late, self._jumps)
 
 
+def datasync(fd: int) -> None:
+    """``fdatasync`` where the OS has it (Linux), else ``fsync``: the file's data is on the
+    disk itself, not only in the OS's cache (it survives a power cut)."""
+    getattr(os, "fdatasync", os.fsync)(fd)
+
+
 class SamplesWriter:
     """Write each gyro's bins to ``<run_dir>/<gyro>/samples.csv`` with columns
     ``t, drift, temp, n_drift, n_temp`` (t = bin start, s; NaN written as ``nan``; floats
@@ -260,7 +267,7 @@ class SamplesWriter:
                 f.write("".join(rows))
                 f.flush()
                 if self.sync:
-                    getattr(os, "fdatasync", os.fsync)(f.fileno())
+                    datasync(f.fileno())
             except OSError as exc:
                 raise OutputError(f"{self.paths[name]}: cannot write: "
                                   f"{exc.strerror or exc}") from exc

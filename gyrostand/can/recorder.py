@@ -36,6 +36,7 @@ from pathlib import Path
 
 import can
 
+from gyrostand.can.binning import datasync
 from gyrostand.errors import CanEdgeError, OutputError
 
 __all__ = ["Recorder", "FlushingBLFWriter", "CommitFile"]
@@ -52,7 +53,7 @@ class CommitFile:
     torn write would bury it mid-file).
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, sync_on_close: bool = False) -> None:
         self.name = str(path)
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         self._committed = 0  # bytes on disk
@@ -61,10 +62,13 @@ class CommitFile:
         self._pos = 0
         self._broken: OSError | None = None
         self.closed = False
-        self.sync_on_close = False  # fdatasync before closing
+        self.sync_on_close = sync_on_close  # fdatasync before closing
 
     def seekable(self) -> bool:
         return True
+
+    def fileno(self) -> int:
+        return self._fd
 
     def tell(self) -> int:
         return self._pos
@@ -122,7 +126,7 @@ class CommitFile:
             if self._broken is None:
                 self.flush()
                 if self.sync_on_close:
-                    _datasync(self._fd)
+                    datasync(self._fd)
         finally:
             self.closed = True
             os.close(self._fd)
@@ -137,8 +141,10 @@ class FlushingBLFWriter(can.BLFWriter):
     ``BLFWriter.stop`` does, without closing; ``tests/can`` checks the result is readable.
     """
 
-    def __init__(self, path: str | Path, **kwargs: object) -> None:
-        super().__init__(CommitFile(path), **kwargs)  # type: ignore[arg-type]
+    def __init__(self, path: str | Path, *, sync_on_close: bool = False,
+                 **kwargs: object) -> None:
+        file = CommitFile(path, sync_on_close=sync_on_close)
+        super().__init__(file, **kwargs)  # type: ignore[arg-type]
 
     def flush(self) -> None:
         if self.file.closed:
@@ -149,11 +155,6 @@ class FlushingBLFWriter(can.BLFWriter):
         self._write_header(end)
         self.file.seek(end)
         self.file.flush()  # commit: header in place, then the container(s), one write
-
-
-def _datasync(fd: int) -> None:
-    """``fdatasync`` where the OS has it (Linux), else ``fsync``."""
-    getattr(os, "fdatasync", os.fsync)(fd)
 
 
 class Recorder(can.Listener):
@@ -167,8 +168,8 @@ class Recorder(can.Listener):
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             if self.path.suffix.lower() == ".blf":
-                self._writer: can.Listener = FlushingBLFWriter(self.path)
-                self._writer.file.sync_on_close = durable  # type: ignore[union-attr]
+                self._writer: can.Listener = FlushingBLFWriter(self.path,
+                                                               sync_on_close=durable)
             else:
                 self._writer = can.Logger(self.path)
         except Exception as exc:
@@ -247,15 +248,14 @@ class Recorder(can.Listener):
             try:
                 self._flush_locked()
                 f = getattr(self._writer, "file", None)
-                fd = f._fd if isinstance(f, CommitFile) else f.fileno() if f else None
-                fd = os.dup(fd) if fd is not None else None  # stays open if stop() closes
+                fd = os.dup(f.fileno()) if f is not None else None  # open if stop() closes
             except OSError as exc:
                 self._fail(exc)
                 return
         if fd is None:
             return
         try:  # outside the lock: frames keep being recorded while the disk catches up
-            _datasync(fd)
+            datasync(fd)
         except OSError as exc:
             with self._lock:
                 self._fail(exc)

@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from ..can.binning import datasync
 from ..errors import OutputError
 from .online import OnlineEstimate
 
@@ -228,7 +229,7 @@ class EstimatesWriter:
         try:
             self._f.flush()
             if self.sync:
-                getattr(os, "fdatasync", os.fsync)(self._f.fileno())
+                datasync(self._f.fileno())
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
@@ -295,8 +296,8 @@ class SegmentLog:
 
     def update(self, stats: dict[str, Any], *, ended_by: str | None = None,
                extra: dict[str, Any] | None = None) -> None:
-        """Record this segment's counts (:meth:`Pipeline.stats` keys ``decoder``,
-        ``binner``, ``samples``; plus ``extra``, e.g. the recorder's) and write the file;
+        """Record this segment's counts (:meth:`Pipeline.counts`: ``decoder``, ``binner``,
+        ``samples``; plus ``extra``, e.g. the recorder's) and write the file;
         ``ended_by`` marks the segment finished. Raises :class:`OutputError`."""
         cur = self.current
         cur["decoder"] = stats["decoder"]
