@@ -26,7 +26,7 @@ import can
 from cantools.database.can import Database
 
 from gyrostand.can.dbc import MessageRef, SignalRef, frame_key
-from gyrostand.can.logread import ERROR_FRAME, REMOTE_FRAME, Frame, frame_fields
+from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
 
 try:
     from cantools.database.utils import decode_data as _cantools_decode_data
@@ -35,8 +35,7 @@ except ImportError:  # another cantools: decode_simple is used
 _decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
-           "Sample", "Command", "MALFORMED", "Frame", "frame_fields", "ERROR_FRAME",
-           "REMOTE_FRAME"]
+           "Sample", "Command", "MALFORMED"]
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +54,6 @@ REASONS = (
     "remote_frame",
     "overflow",          # the sample buffer (or command queue) was full
 )
-_R = {name: i for i, name in enumerate(REASONS)}
 (_UNKNOWN_ID, _WRONG_DLC, _UNDECODABLE, _OUT_OF_RANGE, _BAD_TIMESTAMP, _NON_MONOTONIC,
  _TIME_JUMP, _ERROR_FRAME, _REMOTE_FRAME, _OVERFLOW) = range(len(REASONS))
 _isfinite = math.isfinite
@@ -256,9 +254,6 @@ class DecodingListener(can.Listener):
         with self._lock:
             self._receive(frames)
 
-    def _reject(self, reason: str) -> None:
-        self._rej[_R[reason]] += 1
-
     def _receive(self, frames: Iterable[Frame]) -> None:
         """The receive path, for one frame or a batch (the caller holds the lock). State
         used per frame is held in locals for the batch and written back at its end."""
@@ -399,7 +394,7 @@ class DecodingListener(can.Listener):
         rejected): queue it marked ``MALFORMED`` so the daemon answers with a nack, with
         whatever signals the bytes present still give (to echo Command and Sequence)."""
         if len(self._commands) >= self._command_capacity:
-            self._reject("overflow")
+            self._rej[_OVERFLOW] += 1
             return
         try:
             values = dict(route.message.decode(bytes(data), decode_choices=False,
