@@ -244,7 +244,7 @@ class Pipeline:
         for w in self.estimates.values():
             w.flush()
         if self.segments is not None:
-            self.segments.update(self.stats())
+            self.segments.update(self.counts())
 
     # -- per step ----------------------------------------------------------------------
     def step(self, bins: Sequence[Bin]) -> None:
@@ -433,18 +433,24 @@ class Pipeline:
         return path
 
     # -- end of run --------------------------------------------------------------------
-    def stats(self) -> dict[str, Any]:
+    def counts(self) -> dict[str, Any]:
+        """The decoder's, the binner's and the samples writer's counts (cheap: what every
+        acknowledgement records in ``segments.json``)."""
         d = self.listener.stats()
         dec = asdict(d)
         dec["rejected_total"] = d.rejected_total
+        return {"decoder": dec, "binner": asdict(self.binner.stats()),
+                "samples": {"rows_written": self.samples.rows,
+                            "resumed_bins": dict(self.resumed)}}
+
+    def stats(self) -> dict[str, Any]:
         return {
-            "decoder": dec, "binner": asdict(self.binner.stats()),
+            **self.counts(),
             "responses": {"result_rounds": self._rounds, "heartbeats": self._beats,
                           "frames_sent": getattr(self.sink, "sent", 0),
                           "send_errors": getattr(self.sink, "errors", 0),
                           "not_sent_offline": getattr(self.sink, "offline", 0)},
             "commands": dict(self.commands),
-            "samples": {"rows_written": self.samples.rows, "resumed_bins": dict(self.resumed)},
             "timing": {"bin_steps": len(self.step_ms),
                        "step_ms_median": _quantile(self.step_ms, 0.5),
                        "step_ms_p99": _quantile(self.step_ms, 0.99)},
