@@ -6,6 +6,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
@@ -20,17 +21,43 @@ def build_parser() -> argparse.ArgumentParser:
         description="CAN-bus field service for gyro thermal test stands.",
     )
     parser.add_argument("--version", action="version", version=f"gyrostand {__version__}")
-    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
+    _add_global_args(parser, argparse.SUPPRESS)
     sub = parser.add_subparsers(dest="command", required=True)
     for mod in SUBCOMMANDS:
         mod.add_parser(sub)
+    for subparser in sub.choices.values():  # `gyrostand run CFG -v` works as `-v run CFG`
+        _add_global_args(subparser, argparse.SUPPRESS)
     return parser
+
+
+def _add_global_args(parser: argparse.ArgumentParser, default: Any) -> None:
+    """``--debug`` and ``-v``, before or after the subcommand. Each parser counts into its
+    own destination (a subparser's namespace replaces the parent's values), suppressed
+    when not given; :func:`main` adds them up."""
+    g = parser.add_argument_group("global options (before or after the subcommand)")
+    g.add_argument("--debug", action="store_true", default=default,
+                   dest=f"debug_{id(parser)}", help="show tracebacks on errors")
+    g.add_argument("-v", "--verbose", action="count", default=default,
+                   dest=f"verbose_{id(parser)}", help="more logging (-vv: debug)")
+
+
+def _gather_globals(args: argparse.Namespace) -> None:
+    """Sum ``-v`` and OR ``--debug`` over the main parser and the subcommand's."""
+    verbose, debug = 0, False
+    for key in [k for k in vars(args) if k.startswith(("verbose_", "debug_"))]:
+        value = getattr(args, key)
+        delattr(args, key)
+        if key.startswith("verbose_"):
+            verbose += int(value)
+        else:
+            debug = debug or bool(value)
+    args.verbose, args.debug = verbose, debug
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    _gather_globals(args)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level

@@ -1,11 +1,53 @@
-"""Printing shared by the run/replay/demo subcommands."""
+"""Options and printing shared by the run/replay/simulate/demo subcommands."""
 
 from __future__ import annotations
 
-from typing import TextIO
+import argparse
+import dataclasses
+from types import MappingProxyType
+from typing import Any, TextIO
 
+from ..config import SessionConfig
 from ..session.final import result_table
 from ..session.pipeline import RunOutcome
+
+#: the python-can command-line options (``can.logger``, ``can.player``, ``can.viewer``)
+#: and the ``can.Bus`` argument each one sets
+BUS_OPTIONS = {"interface": "interface", "channel": "channel", "bitrate": "bitrate",
+               "fd": "fd", "data_bitrate": "data_bitrate"}
+
+
+def add_bus_args(p: Any) -> None:
+    """``-i/--interface``, ``-c/--channel``, ``-b/--bitrate``, ``--fd``, ``--data-bitrate``
+    as python-can's own tools spell them; each one given replaces that key of the session's
+    ``bus:`` (the other keys are passed to ``can.Bus`` as they are)."""
+    g = p.add_argument_group(
+        "bus (python-can's options; each one given overrides that key of the session's bus:)")
+    g.add_argument("-i", "--interface", default=None, metavar="NAME",
+                   help="python-can interface, e.g. socketcan, pcan, vector, kvaser, "
+                        "remote, virtual")
+    g.add_argument("-c", "--channel", default=None, metavar="CH",
+                   help="channel of the interface, e.g. can0, PCAN_USBBUS1, 0, "
+                        "ws://127.0.0.1:54701/")
+    g.add_argument("-b", "--bitrate", type=int, default=None, metavar="BIT/S",
+                   help="nominal bitrate, e.g. 500000")
+    g.add_argument("--fd", action="store_true", default=None, help="open the bus in CAN FD mode")
+    g.add_argument("--data-bitrate", dest="data_bitrate", type=int, default=None,
+                   metavar="BIT/S", help="CAN FD data-phase bitrate, e.g. 2000000")
+
+
+def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``can.Bus`` arguments given on the command line (only those given)."""
+    return {key: getattr(args, opt) for opt, key in BUS_OPTIONS.items()
+            if getattr(args, opt, None) is not None}
+
+
+def with_bus_overrides(cfg: SessionConfig, args: argparse.Namespace) -> SessionConfig:
+    """``cfg`` with the command line's bus options merged over its ``bus:``."""
+    over = bus_overrides(args)
+    if not over:
+        return cfg
+    return dataclasses.replace(cfg, bus=MappingProxyType({**cfg.bus, **over}))
 
 
 def print_outcome(outcome: RunOutcome, out: TextIO,

@@ -18,7 +18,7 @@ from ..errors import ConfigError
 from ..session.live import run_live
 from ..session.offline import simulated_frames, truth_params
 from ..session.stand import SimulatedStand
-from .common import print_outcome
+from .common import add_bus_args, print_outcome, with_bus_overrides
 
 #: where the demo config lives: the repository next to the package, else the cwd
 CANDIDATES = (Path(__file__).resolve().parents[2] / "configs" / "demo.yaml",
@@ -38,12 +38,14 @@ def add_parser(sub: Any) -> None:
                        description=__doc__)
     p.add_argument("--config", default=None, help="session file (default configs/demo.yaml)")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="parent folder of the run folder (default: session.output)")
+                   help="parent folder under which the run folder <name>-<UTC time>/ is "
+                        "made (default: session.output)")
+    add_bus_args(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    cfg = load_config(args.config or find_demo_config())
+    cfg = with_bus_overrides(load_config(args.config or find_demo_config()), args)
     sim = cfg.simulate
     if sim is None:
         raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")

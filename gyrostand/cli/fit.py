@@ -7,6 +7,7 @@ import json
 import sys
 from typing import Any
 
+from ..core.terms import VOCABULARY
 from ..workbench import FitStep, run_fit
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
 
@@ -14,8 +15,11 @@ from .workbench_args import add_subject_args, fmt_estimate, subject_of
 def add_parser(sub: Any) -> None:
     p = sub.add_parser("fit", help="add or remove model terms, refit, show before/after")
     add_subject_args(p)
-    p.add_argument("--add", action="append", default=[], metavar="TERM")
-    p.add_argument("--remove", action="append", default=[], metavar="TERM")
+    terms = ", ".join(VOCABULARY)
+    p.add_argument("--add", action="append", default=[], metavar="TERM",
+                   help=f"add a model term (repeatable); one of: {terms}")
+    p.add_argument("--remove", action="append", default=[], metavar="TERM",
+                   help="remove a term of the current model (repeatable; 'white' stays)")
     p.add_argument("--json", action="store_true", help="print the step as JSON")
     p.set_defaults(func=run)
 

@@ -10,6 +10,7 @@ from typing import Any
 from ..core.data import Samples
 from ..core.identify import IDENTIFIERS, identify
 from ..core.model import Model
+from ..core.terms import VOCABULARY
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -21,10 +22,13 @@ def add_parser(sub: Any) -> None:
         description="Identify the drift model from a CSV with columns t (s), drift, temp.",
     )
     p.add_argument("samples", help="CSV with a header containing t, drift, temp")
-    p.add_argument("--method", choices=sorted(IDENTIFIERS), default="ml")
+    p.add_argument("--method", choices=sorted(IDENTIFIERS), default="ml",
+                   help="identifier: lsq (the paper's least squares), lkf (its linearized "
+                        "Kalman filter), ml (exact maximum likelihood; default)")
     p.add_argument("--model", default=DEFAULT_MODEL,
-                   help=f"comma-separated model terms (default {DEFAULT_MODEL}); "
-                        "'white' measurement noise is always included")
+                   help=f"comma-separated model terms (default {DEFAULT_MODEL}) of: "
+                        f"{', '.join(VOCABULARY)}; 'white' measurement noise is always "
+                        "included")
     p.add_argument("--sigma", type=float, default=None,
                    help="known stationary drift std σ (markov.sigma), as in the paper")
     p.add_argument("--json", action="store_true", help="print the result as JSON")

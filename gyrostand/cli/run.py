@@ -1,5 +1,5 @@
-"""``gyrostand run CONFIG [--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the
-live daemon."""
+"""``gyrostand run CONFIG [-i IF] [-c CH] [-b BIT/S] [--fd] [--data-bitrate BIT/S]
+[--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the live daemon."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 from ..config import load_config
 from ..session.live import run_live
-from .common import print_outcome
+from .common import add_bus_args, print_outcome, with_bus_overrides
 
 
 def add_parser(sub: Any) -> None:
@@ -20,12 +20,13 @@ def add_parser(sub: Any) -> None:
                     "stop command write the final fit and report. Prints 'ready: RUN_DIR' "
                     "once listening.")
     p.add_argument("config", help="YAML session file")
+    add_bus_args(p)
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S s of frame time from the first frame (or S+5 s of "
                         "wall time when frames stop flowing)")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="parent folder of the run folder (default: the config's "
-                        "session.output)")
+                   help="parent folder under which the run folder <name>-<UTC time>/ is "
+                        "made (default: the config's session.output)")
     p.add_argument("--idle", action="store_true",
                    help="bin and record, but identify only after a start command")
     p.add_argument("--resume", nargs="?", const=True, default=None, metavar="RUN_DIR",
@@ -37,7 +38,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    cfg = load_config(args.config)
+    cfg = with_bus_overrides(load_config(args.config), args)
 
     def ready(run_dir) -> None:
         print(f"ready: {run_dir}", flush=True)

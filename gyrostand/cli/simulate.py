@@ -1,8 +1,13 @@
-"""``gyrostand simulate CONFIG [--out LOG] [--realtime | --fast] [--speed X]``."""
+"""``gyrostand simulate CONFIG [--log LOG] [-i IF] [-c CH] [-b BIT/S] [--fd]
+[--data-bitrate BIT/S] [--realtime | --fast] [--speed X]``.
+
+``--log`` was ``--out`` (still accepted, with a warning): everywhere else ``--out`` is the
+parent folder of a run folder, here the argument is one log file."""
 
 from __future__ import annotations
 
 import argparse
+import logging
 from typing import Any
 
 from ..can.bus import open_bus
@@ -10,6 +15,9 @@ from ..can.framesim import send_frames, write_log
 from ..config import load_config
 from ..errors import ConfigError
 from ..session.offline import simulated_frames
+from .common import add_bus_args, with_bus_overrides
+
+log = logging.getLogger(__name__)
 
 
 def add_parser(sub: Any) -> None:
@@ -20,7 +28,12 @@ def add_parser(sub: Any) -> None:
                     "with jitter, drops and quantization, sent on the configured bus or "
                     "written to a log file (suffix picks the format: .blf, .asc, .log, .csv).")
     p.add_argument("config", help="YAML session file with a simulate section")
-    p.add_argument("--out", default=None, metavar="LOG", help="write a log file instead")
+    p.add_argument("--log", default=None, metavar="LOG",
+                   help="write the frames into this log file instead of sending them "
+                        "(.blf, .asc, .log, .csv)")
+    p.add_argument("--out", dest="out_deprecated", default=None, metavar="LOG",
+                   help="deprecated spelling of --log")
+    add_bus_args(p)
     pace = p.add_mutually_exclusive_group()
     pace.add_argument("--realtime", action="store_true", default=None,
                       help="send paced to the frame timestamps")
@@ -34,11 +47,20 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if cfg.simulate is None:
         raise ConfigError(f"{args.config}: simulate: missing (the simulator needs it)")
+    path = args.log
+    if args.out_deprecated is not None:
+        if path is not None:
+            raise ConfigError("simulate: give --log LOG (--out is its deprecated spelling), "
+                              "not both")
+        log.warning("simulate --out LOG is deprecated: use --log LOG (--out is a folder "
+                    "in every other command)")
+        path = args.out_deprecated
     frames = simulated_frames(cfg)
-    if args.out:
-        n = write_log(args.out, frames)
-        print(f"wrote {n} frames to {args.out}")
+    if path:
+        n = write_log(path, frames)
+        print(f"wrote {n} frames to {path}")
         return 0
+    cfg = with_bus_overrides(cfg, args)
     realtime = cfg.simulate.realtime if args.realtime is None else args.realtime
     bus = open_bus(cfg.bus)
     try:

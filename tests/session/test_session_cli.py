@@ -22,7 +22,7 @@ def _cfg(tmp_path, channel="gyrostand-cli"):
 def test_simulate_to_a_log_then_replay_it(tmp_path, capsys):
     cfg = _cfg(tmp_path)
     log = tmp_path / "sim.blf"
-    assert main(["simulate", str(cfg), "--out", str(log)]) == 0
+    assert main(["simulate", str(cfg), "--log", str(log)]) == 0
     n = sum(1 for _ in read_log(log))
     assert capsys.readouterr().out.strip() == f"wrote {n} frames to {log}"
     assert 3000 < n <= 3030  # 101 s (t = 0..100) x 30 Hz, 0.1 % dropped
