@@ -7,7 +7,7 @@ import argparse
 import sys
 from typing import Any
 
-from ..config import load_config
+from ..config import SessionConfig, load_config
 from ..session.live import run_live
 from .common import add_bus_args, print_outcome, with_bus_overrides
 
@@ -34,11 +34,17 @@ def add_parser(sub: Any) -> None:
                         "session's newest run folder under --out / session.output; bins "
                         "are appended after the last one written, the raw log continues "
                         "in raw-2.blf, raw-3.blf, ...")
+    p.add_argument("--check", action="store_true",
+                   help="validate the session file (keys, DBC, signal mapping, response "
+                        "frames) and print what it maps, without opening the bus")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     cfg = with_bus_overrides(load_config(args.config), args)
+    if args.check:
+        print(describe_session(cfg))
+        return 0
 
     def ready(run_dir) -> None:
         print(f"ready: {run_dir}", flush=True)
@@ -47,3 +53,33 @@ def run(args: argparse.Namespace) -> int:
                        on_ready=ready, resume=args.resume)
     print_outcome(outcome, sys.stdout)
     return 0 if outcome.ok else 1
+
+
+def describe_session(cfg: SessionConfig) -> str:
+    """What a valid session maps, for ``run --check``."""
+    bus = ", ".join(f"{k}={v!r}" for k, v in cfg.bus.items())
+    lines = [f"{cfg.path}: valid session {cfg.name!r}",
+             f"  bus (not opened): {bus}",
+             f"  dbc: {cfg.dbc_path} ({len(cfg.db.messages)} messages)",
+             f"  sampling: dt {cfg.sampling.dt:g} s; runs under {cfg.output}"]
+    for g in cfg.gyros:
+        lines.append(f"  gyro {g.name}: model {','.join(g.model)}; identifiers "
+                     f"{','.join(g.identifiers)}")
+        for role, ch in (("drift", g.drift), ("temperature", g.temperature)):
+            s = ch.signal
+            mux = f" when {s.multiplexer} = {'/'.join(map(str, s.multiplexer_ids))}" \
+                if s.multiplexer else ""
+            cnt = f", counter {ch.counter.name}" if ch.counter else ""
+            lines.append(f"    {role:<12} {s.message.describe()}.{s.name} "
+                         f"[{s.unit or 'no unit'}]{mux}{cnt}")
+        if g.result is not None:
+            summ = f", summary {g.result.summary.describe()}" if g.result.summary else ""
+            lines.append(f"    results      {g.result.values.describe()}{summ}")
+    r = cfg.responses
+    if r.status or r.ack or r.command:
+        lines.append("  responses: " + ", ".join(
+            f"{k} {m.describe()}" for k, m in (("status", r.status), ("ack", r.ack),
+                                               ("command", r.command)) if m is not None))
+    else:
+        lines.append("  responses: none (listen only)")
+    return "\n".join(lines)

@@ -1,0 +1,233 @@
+"""``gyrostand init``: a commented session file for a DBC, from :func:`~gyrostand.can.survey.survey`.
+
+The daemon answers on the bus with its own frames (results, summaries, status, acks) and
+listens to a command frame (``dbc/README.md``). Their source, in order:
+
+1. the DBC already has them (it is ``dbc/gyrostand.dbc``, or carries messages with their
+   signals): the session names them;
+2. otherwise they are copied from ``dbc/gyrostand.dbc`` into a new DBC beside the session
+   file (``<session stem>.dbc``: the user's messages unchanged plus ours), at our own ids
+   (command 0x0F0, ack 0x0F1, status 0x500, result *i* 0x300 + *i* − 1, summary *i*
+   0x310 + *i* − 1) or, with ``id_base``, at consecutive standard ids from there; an id the
+   user's DBC already uses is refused with the clash named;
+3. ``listen_only``: no response frames and no command channel.
+
+The file is written as text (comments are the point), then loaded with the session loader
+by the caller, so what ``init`` writes is what ``run --check`` accepts.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import os
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gyrostand.can.dbc import load_dbc
+from gyrostand.can.survey import (
+    GyroProposal,
+    SignalInfo,
+    Survey,
+    daemon_frame_ids,
+    dump_dbc,
+    survey,
+    with_daemon_frames,
+)
+from gyrostand.errors import ConfigError
+
+__all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold"]
+
+log = logging.getLogger(__name__)
+
+#: the project's frame catalogue, next to the package in a source checkout
+OWN_DBC = Path(__file__).resolve().parents[2] / "dbc" / "gyrostand.dbc"
+DEFAULT_MODEL = ("markov", "temp", "bias")
+DEFAULT_IDENTIFIERS = ("lkf", "lsq")
+
+
+@dataclass
+class Scaffold:
+    """What :func:`scaffold` made: the session text, the survey, and (when the daemon's
+    frames were added) the merged DBC to write beside it."""
+
+    text: str
+    survey: Survey
+    dbc_path: Path
+    merged_dbc: Any = None  # a cantools Database
+    responses: dict[str, str] = field(default_factory=dict)
+    results: dict[str, tuple[str, str]] = field(default_factory=dict)
+
+
+def _yaml_str(s: str) -> str:
+    return s if re.match(r"^[A-Za-z_][A-Za-z0-9_.-]*$", s) and s.lower() not in (
+        "yes", "no", "true", "false", "on", "off", "null") else json.dumps(s)
+
+
+def _tag_index(name: str) -> str | None:
+    m = re.search(r"(\d+)$", name)
+    return m.group(1) if m else None
+
+
+def _match_results(gyros: list[GyroProposal], names: list[str]) -> dict[str, str]:
+    """gyro -> daemon message of that role: same trailing number, else in order."""
+    out: dict[str, str] = {}
+    free = list(names)
+    for g in gyros:
+        idx = _tag_index(g.name)
+        hit = next((n for n in free if idx is not None and _tag_index(n) == idx), None)
+        if hit is not None:
+            out[g.name] = hit
+            free.remove(hit)
+    for g in gyros:
+        if g.name not in out and free:
+            out[g.name] = free.pop(0)
+    return out
+
+
+def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str) -> str:
+    counter_part = f", counter: {_yaml_str(counter)}" if counter else ""
+    return f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}}}"
+
+
+def _describe(s: SignalInfo, counter: str | None, db: Any) -> str:
+    kind = "extended" if s.is_extended else "standard"
+    msg = db.get_message_by_name(s.message)
+    mux = ""
+    if s.mux_ids:
+        sel = next((x.name for x in msg.signals if x.is_multiplexer), "mux")
+        mux = f", when {sel} = {'/'.join(str(i) for i in s.mux_ids)}"
+    why = "unit" if s.kind else "name only: check"
+    cnt = f"; counter {counter}" if counter else "; no rolling counter found"
+    return (f"{s.message}.{s.signal} (0x{s.frame_id:X} {kind}, unit {s.unit or 'none'!r}"
+            f"{mux}; by {why}{cnt})")
+
+
+def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None = None,
+             name: str | None = None, id_base: int | None = None,
+             listen_only: bool = False, own_dbc: str | Path = OWN_DBC) -> Scaffold:
+    """Survey ``dbc`` and compose the session file to be written at ``out``.
+
+    ``bus`` the ``bus:`` section (default socketcan can0); ``name`` the session name
+    (default the DBC's file stem). Raises :class:`~gyrostand.errors.ConfigError` /
+    :class:`~gyrostand.errors.CanEdgeError` naming the file on a problem."""
+    dbc = Path(dbc).resolve()
+    out = Path(out)
+    db = load_dbc(dbc)
+    sv = survey(db, source=str(dbc))
+    if not sv.gyros:
+        why = "; ".join(f"{d.describe()}: {w}" for d, w in sv.left_out)
+        raise ConfigError(f"{dbc}: no gyro could be mapped ({why})")
+    session_name = name or re.sub(r"[^A-Za-z0-9_.-]", "_", dbc.stem).lstrip("_.-") or "stand"
+    responses: dict[str, str] = {}
+    results: dict[str, tuple[str, str]] = {}
+    merged: Any = None
+    dbc_for_session = dbc
+    origin = ""
+    if not listen_only:
+        if {"status", "ack", "command"} <= set(sv.daemon_messages) and id_base is None:
+            origin = f"the daemon's own frames, found in {dbc.name}"
+            for role in ("status", "ack", "command"):
+                responses[role] = sv.daemon_messages[role][0]
+            res = _match_results(sv.gyros, sv.daemon_messages.get("result", []))
+            summ = _match_results(sv.gyros, sv.daemon_messages.get("summary", []))
+            results = {g: (res[g], summ.get(g, "")) for g in res}
+        else:
+            own = load_dbc(own_dbc)
+            merged = with_daemon_frames(db, own, [g.drift.unit for g in sv.gyros], id_base,
+                                        str(dbc))
+            dbc_for_session = out.resolve().with_name(f"{out.stem}+gyrostand.dbc")
+            if dbc_for_session == dbc:
+                raise ConfigError(f"{out}: the merged DBC would overwrite {dbc}; choose "
+                                  "another -o")
+            ids = daemon_frame_ids(len(sv.gyros), id_base)
+            where = "our own ids" if id_base is None else f"ids from 0x{id_base:X}"
+            origin = (f"the daemon's frames copied from dbc/gyrostand.dbc into "
+                      f"{dbc_for_session.name} ({dbc.name}'s messages plus ours, at {where})")
+            responses = {"status": "GS_STATUS", "ack": "GS_ACK", "command": "GS_COMMAND"}
+            results = {g.name: (f"GS_RESULT_{i}", f"GS_SUMMARY_{i}")
+                       for i, g in enumerate(sv.gyros, start=1)}
+            log.info("daemon frames at %s", ", ".join(f"{k} 0x{v:X}" for k, v in ids.items()))
+    text = _render(sv, db, dbc, dbc_for_session, out, session_name, bus, responses, results,
+                   origin)
+    return Scaffold(text, sv, dbc_for_session, merged, responses, results)
+
+
+def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
+            session_name: str, bus: Mapping[str, Any] | None, responses: dict[str, str],
+            results: dict[str, tuple[str, str]], origin: str) -> str:
+    rel = os.path.relpath(dbc_for_session, out.resolve().parent)
+    today = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d")
+    bus = dict(bus or {"interface": "socketcan", "channel": "can0"})
+    L = [f"# gyrostand session for {dbc.name}, written by `gyrostand init` on {today}.",
+         "# The mapping below was proposed from the DBC's units and names: check every",
+         "# line, then validate without opening the bus:",
+         f"#     gyrostand run {out.name} --check",
+         "# Every key is explained in configs/demo.yaml of the gyrostand repository.", ""]
+    for w in sv.warnings:
+        L.append(f"# CHECK: {w}")
+    L += ["session:",
+          f"  name: {_yaml_str(session_name)}",
+          "  output: runs                    # run folders go here (relative to this file)",
+          "  fsync: true                     # each 1-s acknowledgement survives a power cut",
+          "",
+          "bus:                              # passed to can.Bus(**bus); on the command line "
+          "-i/-c/-b override it"]
+    for k, v in bus.items():
+        L.append(f"  {k}: {json.dumps(v) if isinstance(v, str) else json.dumps(v)}")
+    L += ["", f"dbc: {json.dumps(rel)}", "",
+          "sampling:",
+          "  dt: 1.0                         # s, bin width", "", "gyros:"]
+    for g in sv.gyros:
+        L.append(f"  - name: {_yaml_str(g.name)}")
+        L.append(f"    # drift:       {_describe(g.drift, g.drift_counter, db)}")
+        L.append(f"    # temperature: {_describe(g.temperature, g.temperature_counter, db)}")
+        for note in g.notes:
+            L.append(f"    # CHECK: {note}")
+        L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message)))
+        L.append(_channel_line("temperature", g.temperature, g.temperature_counter,
+                               _yaml_str(g.temperature.message)))
+        L.append(f"    model: [{', '.join(DEFAULT_MODEL)}]       # terms: see README "
+                 "'Model terms'")
+        L.append(f"    identifiers: [{', '.join(DEFAULT_IDENTIFIERS)}]  # online; ml always "
+                 "runs at the end")
+        if g.name in results:
+            values, summary = results[g.name]
+            summ = f", summary: {_yaml_str(summary)}" if summary else ""
+            L.append(f"    result: {{message: {_yaml_str(values)}{summ}}}")
+    for d, why in sv.left_out:
+        L.append(f"  # left out: drift {d.describe()} ({d.unit or 'no unit'}): {why}")
+    L.append("")
+    if responses:
+        L += [f"responses:                         # {origin}",
+              "  period: 10                      # s of frame time between result rounds",
+              "  heartbeat: 1.0                  # s between status heartbeats",
+              f"  status: {_yaml_str(responses['status'])}",
+              f"  ack: {_yaml_str(responses['ack'])}",
+              f"  command: {_yaml_str(responses['command'])}",
+              "  node: 1                         # this daemon's Target id (255 addresses all)"]
+    else:
+        L += ["# responses: none (listen only): the daemon records, bins and identifies,",
+              "# but sends no result/status frames and takes no commands."]
+    L += ["", "# To try this layout without the stand, add a simulate: section (see",
+          "# configs/demo.yaml) and run `gyrostand demo --config THIS.yaml`.", ""]
+    return "\n".join(L)
+
+
+def write_scaffold(sc: Scaffold, out: str | Path, *, force: bool = False) -> list[Path]:
+    """Write the session file (and the merged DBC) at ``out``; refuse to overwrite either
+    unless ``force``. Returns the paths written."""
+    out = Path(out)
+    paths = [out] + ([sc.dbc_path] if sc.merged_dbc is not None else [])
+    for p in paths:
+        if p.exists() and not force:
+            raise ConfigError(f"{p}: exists; pass --force to overwrite")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if sc.merged_dbc is not None:
+        dump_dbc(sc.merged_dbc, sc.dbc_path)
+    out.write_text(sc.text, encoding="utf-8")
+    return paths
