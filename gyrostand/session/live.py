@@ -34,6 +34,11 @@ Then the Notifier is stopped (so the raw log and the bins hold exactly the same 
 the last bins are flushed, and the pipeline writes the final fits and the report.
 
 ``resume`` continues an existing run folder (:mod:`~gyrostand.session.resume`).
+
+Under systemd (``NOTIFY_SOCKET``) the daemon notifies READY once listening, a STATUS line
+(state, bins, gaps, frames) at every acknowledgement, WATCHDOG pings from this worker loop
+(also while it waits out a bus outage) when ``WATCHDOG_USEC`` asks for them, and STOPPING
+when it stops (:mod:`~gyrostand.session.notify`).
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from ..can.bus import open_bus
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
+from .notify import ServiceNotify
 from .outputs import (
     RunLock,
     RunLog,
@@ -211,14 +217,17 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
              on_ready: Callable[[Path], None] | None = None,
              stop_event: threading.Event | None = None, handle_signals: bool = True,
              poll: float = 0.002, truths: dict[str, dict[str, float]] | None = None,
-             resume: str | Path | bool | None = None) -> RunOutcome:
+             resume: str | Path | bool | None = None,
+             notify: ServiceNotify | None = None) -> RunOutcome:
     """Run the daemon on ``cfg.bus`` until stopped; return the outcome (paths, fits).
 
     ``on_ready(run_dir)`` is called once the Notifier listens (frames sent before that are
     lost on most buses). ``truths`` (gyro → parameter values) only label the report.
     ``resume``: continue a run folder instead of starting one (a path, or ``True`` / ``""``
-    for the session's newest run folder under ``out``).
+    for the session's newest run folder under ``out``). ``notify``: systemd notifications
+    (default: from ``NOTIFY_SOCKET`` / ``WATCHDOG_USEC`` in the environment).
     """
+    notify = notify if notify is not None else ServiceNotify.from_environ()
     state = None
     lock: RunLock | None = None
     if resume is not None and resume is not False:
@@ -280,8 +289,10 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
                      run_dir, f" (resumed, raw log {raw_path.name})" if state else "")
             if on_ready is not None:
                 on_ready(run_dir)
+            notify.ready(f"listening on {link.channel}; run folder {run_dir}")
             reason, final_state, outage_s = _loop(pipe, recorder, link, stop, signalled,
-                                                  duration, poll, cfg.reconnect)
+                                                  duration, poll, cfg.reconnect, notify)
+            notify.stopping(f"stopping: {reason}")
         finally:  # the raw log and the bins end with the same frame, even on an error
             link.stop_notifier()
             recorder.stop()
@@ -312,11 +323,19 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
         runlog.close()
         if lock is not None:
             lock.release()
+        notify.close()
+
+
+def _service_status(pipe: Pipeline, note: str = "") -> str:
+    """The STATUS line ``systemctl status`` shows."""
+    d, b = pipe.listener.stats(), pipe.binner.stats()
+    return (f"{pipe.state}{note}: {b.bins} bins, {b.gaps} gaps; frames {d.decoded} decoded, "
+            f"{d.rejected_total} rejected; {pipe.outages} outages")
 
 
 def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Event,
           signalled: list[str], duration: float | None, poll: float,
-          rc: ReconnectConfig) -> tuple[str, str, float]:
+          rc: ReconnectConfig, notify: ServiceNotify) -> tuple[str, str, float]:
     """The worker loop; returns (why it stopped, final state, s spent in outages)."""
     start_wall = time.monotonic()
     first_t: float | None = None
@@ -332,6 +351,8 @@ def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Eve
             if now >= next_tick:
                 pipe.wall_tick()  # acknowledges: raw log, then samples, then estimates
                 next_tick = now + 1.0
+                notify.status(_service_status(pipe))
+            notify.ping(now)  # from this loop only: a hung worker stops the pings
         except OutputError as exc:
             return str(exc), "fault", outage_s
         if recorder.failed is not None:
@@ -345,7 +366,7 @@ def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Eve
         why = link.failure()
         if why is not None:
             t_out = time.monotonic()
-            back = _reconnect(pipe, recorder, link, stop, rc, why)
+            back = _reconnect(pipe, recorder, link, stop, rc, why, notify)
             outage_s += time.monotonic() - t_out
             next_tick = time.monotonic()
             if back is not None:
@@ -362,7 +383,7 @@ def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Eve
 
 
 def _reconnect(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Event,
-               rc: ReconnectConfig, why: str) -> tuple[str, str] | None:
+               rc: ReconnectConfig, why: str, notify: ServiceNotify) -> tuple[str, str] | None:
     """An outage: close the bus, reopen it with backoff. None when the bus is back, else
     (why the run stops, state)."""
     pipe.outages += 1
@@ -377,6 +398,7 @@ def _reconnect(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threadin
     attempts = 0
     while True:
         now = time.monotonic()
+        notify.ping(now)  # the worker is alive: it is waiting for the bus
         if pipe.stop_requested:
             return pipe.stop_requested, "stopped"
         if stop.is_set():
@@ -388,6 +410,7 @@ def _reconnect(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threadin
             except OutputError as exc:
                 return str(exc), "fault"
             next_tick = now + 1.0
+            notify.status(_service_status(pipe, f" (bus outage {pipe.outages})"))
         if now >= next_try:
             attempts += 1
             try:
