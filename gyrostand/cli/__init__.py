@@ -10,9 +10,9 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import demo, diagnose, fit, identify, init, replay, report, run, simulate
+from . import allan, demo, diagnose, fit, identify, init, replay, report, run, simulate
 
-SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report)
+SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan)
 
 
 def build_parser() -> argparse.ArgumentParser:
