@@ -10,9 +10,10 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import allan, demo, diagnose, fit, identify, init, replay, report, run, simulate
+from . import allan, demo, diagnose, export, fit, identify, init, replay, report, run, simulate
 
-SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan)
+SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
+               export)
 
 
 def build_parser() -> argparse.ArgumentParser:

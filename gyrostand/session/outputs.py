@@ -41,7 +41,7 @@ from .online import OnlineEstimate
 
 __all__ = ["make_run_dir", "RunLog", "EstimatesWriter", "estimate_columns", "write_atomic",
            "raw_segments", "next_raw_segment", "latest_run_dir", "RunLock", "check_writable",
-           "SegmentLog", "read_segments", "SEGMENTS_FILE"]
+           "SegmentLog", "read_segments", "SEGMENTS_FILE", "read_estimates_csv"]
 
 log = logging.getLogger(__name__)
 
@@ -241,6 +241,33 @@ class EstimatesWriter:
                 self._f.close()
             except OSError:
                 pass
+
+
+def read_estimates_csv(path: Path) -> dict[str, list[Any]]:
+    """An ``estimates.csv`` back as columns by name: ``<id>:status`` as strings, every
+    other column as floats (``nan`` while unknown). A last line without its line end is
+    torn (the run was killed while appending it): it is left out with a warning; a row
+    with the wrong number of cells is an error naming its line."""
+    text = path.read_text(encoding="utf-8")
+    lines = text.split("\n")
+    if lines[-1]:
+        log.warning("%s: torn last line left out: %r", path, lines[-1][:80])
+    rows = list(csv.reader(lines[:-1]))
+    if not rows or not rows[0] or rows[0][0] != "t":
+        raise OutputError(f"{path}: not an estimates file (the header must start with t)")
+    header = rows[0]
+    cols: dict[str, list[Any]] = {h: [] for h in header}
+    for lineno, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise OutputError(f"{path}: line {lineno}: {len(row)} cells, the header has "
+                              f"{len(header)}")
+        for h, cell in zip(header, row, strict=True):
+            try:
+                cols[h].append(cell if h.endswith(":status") else float(cell))
+            except ValueError:
+                raise OutputError(f"{path}: line {lineno}: column {h}: not a number: "
+                                  f"{cell!r}") from None
+    return cols
 
 
 def _num(x: float) -> str:

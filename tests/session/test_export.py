@@ -1,0 +1,113 @@
+"""``gyrostand export RUN --parquet / --mf4``: a replayed run's samples and online
+estimates read back with pyarrow and asammdf equal the CSVs, value for value, with the
+DBC's units and the model's parameter units."""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+
+import numpy as np
+import pytest
+from sessionhelpers import write_cfg_yaml
+
+from gyrostand.can.binning import SAMPLES_COLUMNS, read_samples_csv
+from gyrostand.can.framesim import write_log
+from gyrostand.cli import main
+from gyrostand.config import load_config
+from gyrostand.session.export import ExportError, export_parquet
+from gyrostand.session.offline import run_replay, simulated_frames
+from gyrostand.session.outputs import read_estimates_csv
+
+pa = pytest.importorskip("pyarrow")
+pq = pytest.importorskip("pyarrow.parquet")
+asammdf = pytest.importorskip("asammdf")
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("export")
+    cfg_path = write_cfg_yaml(tmp / "s.yaml", tmp / "runs",
+                              {"interface": "virtual", "channel": "export-test"},
+                              duration=400.0, rates={"drift": 20, "temperature": 10})
+    cfg = load_config(cfg_path)
+    log = tmp / "sim.blf"
+    write_log(log, simulated_frames(cfg))
+    outcome = run_replay(cfg, log, out=tmp / "runs")
+    return outcome.run_dir
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.dtype.kind == b.dtype.kind and np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+
+
+def test_parquet_round_trip(run_dir, tmp_path, capsys):
+    assert main(["export", str(run_dir), "--parquet", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.split() == [
+        "wrote", str(tmp_path / "az" / "samples.parquet"),
+        "wrote", str(tmp_path / "az" / "estimates.parquet")]
+    samples = pq.read_table(tmp_path / "az" / "samples.parquet")
+    csv = read_samples_csv(run_dir / "az" / "samples.csv")
+    assert samples.column_names == list(SAMPLES_COLUMNS) and samples.num_rows == 401
+    for k in SAMPLES_COLUMNS:
+        want = np.asarray(csv[k], dtype=np.int64 if k.startswith("n_") else float)
+        assert _same(samples.column(k).to_numpy(), want), k
+    units = {f.name: f.metadata[b"unit"].decode() for f in samples.schema}
+    assert units == {"t": "s", "drift": "deg/h", "temp": "degC", "n_drift": "",
+                     "n_temp": ""}
+    assert samples.schema.metadata[b"gyro"] == b"az"
+    est = pq.read_table(tmp_path / "az" / "estimates.parquet")
+    cols = read_estimates_csv(run_dir / "az" / "estimates.csv")
+    assert est.column_names == list(cols) and est.num_rows == len(cols["t"]) == 401
+    for k, v in cols.items():
+        got = est.column(k)
+        if k.endswith(":status"):
+            assert got.to_pylist() == v and pa.types.is_dictionary(got.type)
+        else:
+            assert _same(got.to_numpy(), np.asarray(v, dtype=float)), k
+    eu = {f.name: f.metadata[b"unit"].decode() for f in est.schema}
+    assert eu["lkf:markov.beta"] == eu["lkf:markov.beta:std"] == "1/s"
+    assert eu["lsq:temp.gamma"] == "deg/h/(s·°C)" and eu["lkf:markov.sigma"] == "deg/h"
+
+
+def test_mf4_round_trip(run_dir, tmp_path, capsys):
+    assert main(["export", str(run_dir), "--mf4", "--out", str(tmp_path)]) == 0
+    path = tmp_path / f"{run_dir.name}.mf4"
+    assert capsys.readouterr().out.strip() == f"wrote {path}"
+    csv = read_samples_csv(run_dir / "az" / "samples.csv")
+    cols = read_estimates_csv(run_dir / "az" / "estimates.csv")
+    t0 = csv["t"][0]
+    with asammdf.MDF(path) as mdf:
+        assert mdf.version == "4.10"
+        start = mdf.header.start_time
+        assert start == dt.datetime.fromtimestamp(t0, tz=dt.UTC)
+        for k, unit in (("drift", "deg/h"), ("temp", "degC"), ("n_drift", ""),
+                        ("n_temp", "")):
+            sig = mdf.get(f"az.{k}")
+            assert sig.unit == unit
+            assert np.array_equal(sig.samples, np.asarray(csv[k]), equal_nan=True), k
+            assert np.array_equal(sig.timestamps, np.asarray(csv["t"]) - t0)
+        for k, v in cols.items():
+            if k == "t":
+                continue
+            sig = mdf.get("az." + k.replace(":", "."))
+            if k.endswith(":status"):
+                assert [s.decode() for s in sig.samples] == v, k
+            else:
+                assert np.array_equal(sig.samples, np.asarray(v), equal_nan=True), k
+                assert np.array_equal(sig.timestamps, np.asarray(cols["t"]) - t0)
+        assert mdf.get("az.lkf.temp.gamma").unit == "deg/h/(s·°C)"
+        assert mdf.get("az.ml.markov.beta" if "ml:markov.beta" in cols
+                       else "az.lkf.markov.beta.std").unit == "1/s"
+
+
+def test_errors(run_dir, tmp_path, capsys, monkeypatch):
+    assert main(["export", str(run_dir)]) == 2
+    assert "choose a format: --parquet and/or --mf4" in capsys.readouterr().err
+    assert main(["export", str(tmp_path), "--parquet"]) == 2
+    assert "not a run folder (no result.json)" in capsys.readouterr().err
+    assert main(["export", str(run_dir), "--parquet", "--gyro", "zz"]) == 2
+    assert "no gyro 'zz' (the run has az)" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed
+    with pytest.raises(ExportError, match=r"pip install 'gyrostand\[formats\]'"):
+        export_parquet(run_dir, tmp_path)
