@@ -141,3 +141,44 @@ def test_run_check_does_not_open_the_bus_and_names_errors(tmp_path, capsys):
                                         ("", None), ("deg", None)])
 def test_unit_kinds(unit, kind):
     assert unit_kind(unit) == kind
+
+
+@pytest.mark.parametrize("dbc, extra, temps, gamma", [
+    (OWN, [], (20, 45, 35), -0.001),
+    (DATA / "foreign.dbc", [], (20, 45, 35), -0.001),
+    (DATA / "imu3f_fd.dbc", [], (293.15, 318.15, 308.15), -0.0001),  # kelvin
+    (DATA / "fog1a_j1939.dbc", ["--id-base", "0x700"], (20, 45, 35), -0.001),
+])
+def test_an_initialised_session_runs_end_to_end(tmp_path, dbc, extra, temps, gamma):
+    """The written session plus a simulate: section: the stand simulator encodes frames
+    with the (merged) DBC, the replay decodes every one into full bins for every gyro,
+    and the daemon's own result and status frames are built from it."""
+    import json
+
+    import yaml
+
+    from gyrostand.session.offline import run_replay, simulated_frames
+
+    out = tmp_path / "s.yaml"
+    assert main(["init", str(dbc), "-o", str(out), *extra]) == 0
+    d = yaml.safe_load(out.read_text())
+    names = [g["name"] for g in d["gyros"]]
+    d["simulate"] = {
+        "seed": 1, "duration": 300, "rates": {"drift": 20, "temperature": 10},
+        "temperature": [[0, temps[0]], [100, temps[1]], [300, temps[2]]],
+        "gyros": {n: {"model": ["markov", "temp", "white"],
+                      "params": {"markov.beta": 0.0333, "markov.sigma": 0.01,
+                                 "temp.gamma": gamma, "white.sigma": 0.0}} for n in names}}
+    out.write_text(yaml.safe_dump(d))
+    cfg = load_config(out)
+    outcome = run_replay(cfg, list(simulated_frames(cfg)), out=tmp_path / "runs")
+    doc = json.loads(outcome.result_json.read_text())
+    assert doc["stats"]["decoder"]["rejected_total"] == 0
+    assert doc["stats"]["responses"]["result_rounds"] >= 10
+    assert doc["stats"]["responses"]["frames_sent"] > 0
+    for g in names:
+        got = doc["gyros"][g]
+        assert (got["bins"], got["gaps"]) == (301, 0), g
+        if temps[0] < 100:  # in degC; in K, gamma·T and the bias are confounded in 300 s
+            est = got["fits"]["ml"]["parameters"]["temp.gamma"]["value"]
+            assert est == pytest.approx(gamma, rel=0.10), g
