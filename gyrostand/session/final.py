@@ -176,9 +176,20 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
     write_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
+#: the batch refit's column is left out of the table when it is the online value within
+#: this many stds for every parameter (said in a line below the table)
+SAME_SIGMA = 0.05
+
+
 def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
-    """One gyro's parameters: a column per method (value ± std), truth first if known."""
+    """One gyro's parameters: a column per method (value ± std), truth first if known.
+
+    ``lkf`` is the online LKF at stop (what the last CAN round sent), ``lkf_batch`` the
+    batch refit: shown only where it differs from ``lkf`` by more than ``SAME_SIGMA``."""
     methods = list(final.fits)
+    same = _same_fit(final.fits.get("lkf"), final.fits.get("lkf_batch"))
+    if same:
+        methods.remove("lkf_batch")
     head = f"{'parameter':<14}" + (f" {'truth':>12}" if truth else "")
     head += "".join(f" {m:>24}" for m in methods) + "  unit"
     lines = [head]
@@ -202,6 +213,12 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
         f = final.fits[m]
         rms += f" {f.residual_rms:>24.4g}" if isinstance(f, FitResult) else f" {'—':>24}"
     lines.append(rms)
+    lk = final.fits.get("lkf")
+    if isinstance(lk, FitResult) and lk.info.get("online"):
+        lines.append(f"lkf = the online LKF at stop ({lk.info.get('variant', 'relin')}; "
+                     f"status {lk.info.get('status')}), as sent on the bus"
+                     + ("; lkf_batch (the same filter rerun over samples.csv) agrees "
+                        f"within {SAME_SIGMA:g} std" if same else ""))
     for m in methods:
         f = final.fits[m]
         if isinstance(f, str):
@@ -209,6 +226,22 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
         else:
             lines += [f"{m}: warning: {w}" for w in f.warnings]
     return "\n".join(lines)
+
+
+def _same_fit(a: FitResult | str | None, b: FitResult | str | None) -> bool:
+    """Every parameter of ``b`` within ``SAME_SIGMA`` std of ``a``'s (held ones equal to
+    3 significant digits)."""
+    if not isinstance(a, FitResult) or not isinstance(b, FitResult):
+        return False
+    for n, e in b.parameters.items():
+        o = a.parameters.get(n)
+        if o is None:
+            return False
+        tol = SAME_SIGMA * max(e.std, o.std) if not (e.fixed or o.fixed) else \
+            1e-2 * max(abs(e.value), abs(o.value))
+        if abs(e.value - o.value) > tol:
+            return False
+    return True
 
 
 def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[GyroFinal],
