@@ -156,6 +156,7 @@ class RelinLKF:
         self._y = np.empty(cap)
         self._T = np.empty(cap)
         self._X = np.empty((cap, len(self.outputs)))
+        self._Uin = np.empty((cap, len(self.inputs)))  # the inputs u_j(T_k) of every bin
         self._E = np.empty(cap)
         self._F = np.empty(cap)
         self._Tbuf: list[float] = []
@@ -252,9 +253,11 @@ class RelinLKF:
             b = np.empty(cap)
             b[: self.n] = a[: self.n]
             setattr(self, name, b)
-        X = np.empty((cap, self._X.shape[1]))
-        X[: self.n] = self._X[: self.n]
-        self._X = X
+        for name in ("_X", "_Uin"):
+            a = getattr(self, name)
+            b = np.empty((cap, a.shape[1]))
+            b[: self.n] = a[: self.n]
+            setattr(self, name, b)
 
     def _causal_regressors(self, T: float) -> np.ndarray:
         """Output regressors at the newest bin from past bins only (online)."""
@@ -287,10 +290,7 @@ class RelinLKF:
         return Context(t=self.dt * np.arange(n), temp=self._T[:n].copy(), dt=self.dt)
 
     def _U(self) -> np.ndarray:
-        T = self._T[: self.n]
-        if not self.inputs:
-            return np.zeros((self.n, 0))
-        return np.column_stack([_input(k, T) for k in self.inputs])
+        return self._Uin[: self.n]
 
     # ---- filtering ----------------------------------------------------------------------
     def _pass(self, k0: int, k1: int, U: np.ndarray) -> tuple[float, float, int]:
@@ -315,15 +315,11 @@ class RelinLKF:
         self.n += 1
         if self.outputs:
             self._X[k] = self._causal_regressors(T) if regressors is None else regressors
+        for j, key in enumerate(self.inputs):
+            self._Uin[k, j] = _input(key, T)
         if k == 0:
             self._start()
-        ni = len(self.inputs)
-        # U rows k-1, k only
-        lo = max(k - 1, 0)
-        U = np.empty((k + 1, ni))
-        for j, key in enumerate(self.inputs):
-            U[lo:, j] = _input(key, self._T[lo: k + 1])
-        self._pass(k, k + 1, U)
+        self._pass(k, k + 1, self._Uin)
         self._since += 1
         if self.every > 0 and self._since >= self.every:
             self.relinearize(settle_sigma=ONLINE_SETTLE_SIGMA)
@@ -588,6 +584,12 @@ class RelinLKF:
     def innovations(self) -> tuple[np.ndarray, np.ndarray]:
         """``(e, f)`` of the stored bins, from the last pass (or the bins since)."""
         return self._E[: self.n].copy(), self._F[: self.n].copy()
+
+    @property
+    def last_innovation(self) -> tuple[float, float]:
+        """``(e, f)`` of the newest bin (NaN for a gap)."""
+        k = self.n - 1
+        return (float(self._E[k]), float(self._F[k])) if k >= 0 else (math.nan, math.nan)
 
     @property
     def drift(self) -> float:

@@ -24,8 +24,10 @@ temperature channel is empty uses the last temperature seen (the batch fit inter
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -137,6 +139,12 @@ STEP_WARN_SIGMA = 3.0
 RELINEARIZE_S = 100.0
 
 
+@functools.lru_cache(maxsize=NIS_WINDOW + 1)
+def _nis_band(n: int) -> tuple[float, float]:
+    """Two-sided ``NIS_ALPHA`` band of the mean of ``n`` χ²(1) variables."""
+    return (float(chi2.ppf(NIS_ALPHA / 2, n)) / n, float(chi2.ppf(1 - NIS_ALPHA / 2, n)) / n)
+
+
 @dataclass
 class LkfTrack:
     """The online LKF of one gyro: warm-up, then the configured variant bin by bin.
@@ -166,7 +174,9 @@ class LkfTrack:
     e2: float = 0.0
     n_e: int = 0
     failed: str = ""
-    nis: list[float] = field(default_factory=list)
+    #: e²/f of the last ``NIS_WINDOW`` observed bins, and their running sum
+    nis: deque[float] = field(default_factory=lambda: deque(maxlen=NIS_WINDOW))
+    nis_sum: float = 0.0
 
     def __post_init__(self) -> None:
         lkf_layout(self.model)  # raises ModelError for terms the LKF cannot represent
@@ -184,6 +194,9 @@ class LkfTrack:
         if self.cfg.variant == "paper":
             self.filter = OnlineLKF(self.model, self.dt, beta0=point.beta0,
                                     gamma0=point.gamma0, b0=point.b0, held=point.held)
+            log.warning("lkf.variant paper: the paper's single pass at a fixed point; its "
+                        "estimate is one linearisation step and its std no confidence band "
+                        "(status: warning); variant relin converges")
         else:
             fixed = tuple(self.cfg.held) + tuple(
                 k for k, v in (("markov.sigma", self.cfg.sigma),
@@ -212,15 +225,16 @@ class LkfTrack:
             if f.relinearizations != relins:  # the history was re-filtered: new innovations
                 self._refresh_nis()
                 return
-            e, v = float(f._E[f.n - 1]), float(f._F[f.n - 1])
+            e, v = f.last_innovation
         else:
             e, v = f.update(y, T)
         if math.isfinite(e):
             self.e2 += e * e
             self.n_e += 1
+            if len(self.nis) == NIS_WINDOW:
+                self.nis_sum -= self.nis[0]
             self.nis.append(e * e / v)
-            if len(self.nis) > 2 * NIS_WINDOW:
-                del self.nis[:NIS_WINDOW]
+            self.nis_sum += e * e / v
 
     def finish(self) -> None:
         """At stop: a last re-linearisation over the whole record (relin variant), so the
@@ -269,7 +283,9 @@ class LkfTrack:
         if isinstance(f, RelinLKF):
             e_all, v_all = f.innovations
             ok = np.isfinite(e_all)
-            self.nis = list((e_all[ok] ** 2 / v_all[ok])[-NIS_WINDOW:])
+            self.nis = deque((e_all[ok] ** 2 / v_all[ok])[-NIS_WINDOW:].tolist(),
+                             maxlen=NIS_WINDOW)
+            self.nis_sum = math.fsum(self.nis)
             self.e2, self.n_e = float(np.sum(e_all[ok] ** 2)), int(np.sum(ok))
 
     def status(self, est: Mapping[str, tuple[float, float]]) -> tuple[str, str]:
@@ -280,17 +296,16 @@ class LkfTrack:
         warn: list[str] = []
         if not all(math.isfinite(v) and math.isfinite(s) for v, s in est.values()):
             fail.append("non-finite estimate")
-        w = self.nis[-NIS_WINDOW:]
-        if len(w) >= 30:
-            m = float(np.mean(w))
-            lo = chi2.ppf(NIS_ALPHA / 2, len(w)) / len(w)
-            hi = chi2.ppf(1 - NIS_ALPHA / 2, len(w)) / len(w)
+        nw = len(self.nis)
+        if nw >= 30:
+            m = self.nis_sum / nw
+            lo, hi = _nis_band(nw)
             if m > NIS_FAIL:
                 fail.append(f"innovations inconsistent: mean e²/f = {m:.3g} over the last "
-                            f"{len(w)} bins (expected 1)")
+                            f"{nw} bins (expected 1)")
             elif not lo <= m <= hi:
                 warn.append(f"innovations inconsistent: mean e²/f = {m:.3g} over the last "
-                            f"{len(w)} bins, outside [{lo:.2f}, {hi:.2f}]")
+                            f"{nw} bins, outside [{lo:.2f}, {hi:.2f}]")
         b, sb = est["markov.beta"]
         if not b > 0:
             warn.append(f"beta = {b:.3g} <= 0 (not mean-reverting)")
