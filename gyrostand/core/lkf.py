@@ -400,7 +400,7 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
                     "(its std is not a confidence band); use variant relin")
     at = [k for k in ("markov.beta", "temp.gamma") if k in est and
           abs(est[k][0] - point[k]) <= 1e-3 * max(abs(point[k]), 1e-12)]
-    if at:
+    if at and not iterate:  # (an iteration ends at its point by construction)
         loud.append(f"lkf (paper variant): {', '.join(at)} ended at the linearisation "
                     "point: the pass did not move it (its std is not a confidence band); "
                     "use variant relin")

@@ -175,6 +175,7 @@ def test_iterated_lkf_recovers_the_paper_cases(case, base_model):
     s = simulate(base_model, p, paper_profile(), seed=42)
     r = lkf(s, base_model, variant="paper", sigma=0.1, held={"white.sigma": 0.0}, iterate=True)
     assert r.info["settled"]
+    assert not any("ended at the linearisation point" in w for w in r.warnings)
     within(r, p, "markov.beta", rel=0.3)
     within(r, p, "temp.gamma", rel=0.3)
 
