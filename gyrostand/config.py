@@ -64,6 +64,8 @@ log = logging.getLogger(__name__)
 #: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
 MODEL_TERMS = VOCABULARY
 IDENTIFIERS = ("lkf", "lsq", "ml")
+#: the LKF's variants: the converging filter (default) and the paper's single pass
+LKF_VARIANTS = ("relin", "paper")
 
 #: Signals the daemon writes or reads in its own response/command messages.
 RESULT_SIGNALS = ("Kind", "Identifier", "Param", "Value", "Std", "NParams", "Counter")
@@ -105,7 +107,13 @@ class LkfConfig:
     ``warmup`` bins (s of data at Δt = 1 s) are fitted by least squares (point) and the
     core's held-value estimate (noise levels), then the filter starts and replays those
     bins. The paper's fixed point 1e-4 is not used: it biases the estimates badly.
-    ``iterate`` re-linearises the *final* batch LKF until it settles.
+    ``iterate`` re-linearises the paper variant's *final* batch LKF until it settles.
+
+    ``variant``: ``relin`` (default, the converging filter of
+    :mod:`gyrostand.core.lkf_relin`: feedback, re-linearised every ``relinearize_every``
+    bins, default 100 s of bins, with the noise levels the file does not give re-estimated)
+    or ``paper`` (the paper's single pass at a fixed point). ``soaked``: start the moving
+    point in equilibrium with the first temperature (relin only; default true).
     """
 
     beta0: float | None = None
@@ -116,6 +124,9 @@ class LkfConfig:
     held: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     warmup: int = 300
     iterate: bool = False
+    variant: str = "relin"
+    relinearize_every: int | None = None
+    soaked: bool = True
 
     @property
     def needs_warmup(self) -> bool:
@@ -449,7 +460,8 @@ class _Parser:
 
     def lkf(self, value: Any, path: str, model: tuple[str, ...]) -> LkfConfig:
         keys = ("beta0", "gamma0", "b0", "sigma", "white_sigma")
-        m = self.mapping(value, path, (), keys + ("held", "warmup", "iterate"))
+        m = self.mapping(value, path, (), keys + ("held", "warmup", "iterate", "variant",
+                                                   "relinearize_every", "soaked"))
         vals: dict[str, float | None] = {}
         for k in keys:
             v = m.get(k)
@@ -470,7 +482,16 @@ class _Parser:
             held[str(k)] = self.number(v, f"{path}.held.{k}", lo=0.0)
         warmup = self.integer(m.get("warmup", 300), f"{path}.warmup", 10, 10_000_000)
         iterate = bool(self.boolean(m.get("iterate", False), f"{path}.iterate"))
-        return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate, **vals)
+        variant = m.get("variant", "relin")
+        if variant not in LKF_VARIANTS:
+            raise self.fail(f"{path}.variant", f"expected one of {', '.join(LKF_VARIANTS)}, "
+                                               f"got {variant!r}")
+        every = m.get("relinearize_every")
+        every = None if every is None else self.integer(every, f"{path}.relinearize_every",
+                                                        1, 10_000_000)
+        soaked = bool(self.boolean(m.get("soaked", True), f"{path}.soaked"))
+        return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate,
+                         variant=variant, relinearize_every=every, soaked=soaked, **vals)
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         owner: dict[tuple[int, str], str] = {}

@@ -1,4 +1,5 @@
-"""``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S] [--json]``."""
+"""``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S] [--json]
+[--variant relin|paper]``."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Any
 
 from ..core.data import Samples
 from ..core.identify import IDENTIFIERS, identify
+from ..core.lkf import VARIANTS
 from ..core.model import Model
 from ..core.terms import VOCABULARY
 
@@ -36,10 +38,17 @@ def add_parser(sub: Any) -> None:
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
                    help="lsq regressor Y_{k-1} (standard, default) or Y_k (the paper's text)")
     g = p.add_argument_group("lkf options")
-    g.add_argument("--beta0", type=float, default=None, help="linearisation point β₀ (1/s)")
+    g.add_argument("--variant", choices=VARIANTS, default="relin",
+                   help="relin (default): the converging filter run to its fixed point "
+                        "(re-linearised, noise levels re-estimated); paper: the paper's "
+                        "single pass at a fixed point (warns when it stays there or β <= 0)")
+    g.add_argument("--beta0", type=float, default=None,
+                   help="linearisation point β₀ (1/s); relin: its start (default: the "
+                        "lsq/ml fit), paper: default the paper's 1e-4")
     g.add_argument("--gamma0", type=float, default=None, help="linearisation point γ₀")
     g.add_argument("--iterate", action="store_true",
-                   help="re-linearise at the previous estimate until it settles")
+                   help="paper variant: re-linearise at the previous estimate until it "
+                        "settles")
     p.set_defaults(func=run)
 
 
@@ -48,6 +57,7 @@ def options_for(args: argparse.Namespace) -> dict[str, Any]:
     if args.method == "lsq":
         opts["regressor"] = args.regressor
     if args.method == "lkf":
+        opts["variant"] = args.variant
         opts["iterate"] = args.iterate
         if args.beta0 is not None:
             opts["beta0"] = args.beta0

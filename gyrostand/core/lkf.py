@@ -298,19 +298,44 @@ def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> t
     return out, src
 
 
-def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
-        gamma0: float = PAPER_POINT, b0: float = 0.0, sigma: float | None = None,
-        held: Mapping[str, float] | None = None, iterate: bool = False, max_iter: int = 60,
-        tol: float = 1e-4, prior_std: Mapping[str, float] | None = None) -> FitResult:
-    """Run the LKF over the samples (single pass, or iterated with ``iterate=True``).
+#: the LKF's variants: the converging filter and the paper's single pass
+VARIANTS = ("relin", "paper")
+#: relin batch: re-linearisations (each a noise re-estimate and passes to a fixed point)
+#: until the point moves less than this many stds and the noise levels by < 1e-4 relative
+BATCH_SETTLE_SIGMA = 1e-2
+
+
+def lkf(samples: Samples, model: Model, *, variant: str = "relin",
+        beta0: float | None = None, gamma0: float | None = None, b0: float | None = None,
+        sigma: float | None = None, held: Mapping[str, float] | None = None,
+        iterate: bool = False, max_iter: int = 60, tol: float = 1e-4,
+        prior_std: Mapping[str, float] | None = None, soaked: bool = True) -> FitResult:
+    """Run the LKF over the samples.
+
+    ``variant="relin"`` (default): the converging filter of :mod:`.lkf_relin` run over
+    the record to its fixed point (feedback, re-linearised with the held noise levels not
+    given re-estimated, until neither moves); the start point is ``beta0``/``gamma0``/``b0``
+    or, left out, the least-squares (else ML) fit the noise levels come from.
+    ``variant="paper"``: the paper's single pass (or iterated with ``iterate=True``).
 
     Args:
-        beta0, gamma0, b0: linearisation point (default: the paper's 1e-4).
-        sigma: the known σ (``markov.sigma``), as in the paper.
+        beta0, gamma0, b0: linearisation point (paper variant default: the paper's 1e-4).
+        sigma: the known σ (``markov.sigma``), as in the paper; with ``held``, values
+            given are fixed (never re-estimated).
         held: other held values (``white.sigma``, ``random_walk.q``, ...).
-        iterate: re-linearise at the previous estimate until the relative change of every
-            estimate is below ``tol`` (at most ``max_iter`` passes).
+        iterate: (paper) re-linearise at the previous estimate until the relative change
+            of every estimate is below ``tol`` (at most ``max_iter`` passes).
+        soaked: (relin) start the moving point in equilibrium with the first temperature.
     """
+    if variant not in VARIANTS:
+        raise ModelError(f"unknown lkf variant {variant!r}; choose one of "
+                         f"{', '.join(VARIANTS)}")
+    if variant == "relin":
+        return _lkf_relin(samples, model, beta0, gamma0, b0, sigma, held, max_iter,
+                          prior_std, soaked)
+    beta0 = PAPER_POINT if beta0 is None else beta0
+    gamma0 = PAPER_POINT if gamma0 is None else gamma0
+    b0 = 0.0 if b0 is None else b0
     layout = lkf_layout(model)
     given = dict(held or {})
     if sigma is not None:
@@ -368,8 +393,20 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
                 "lsq or ml estimate instead")
     point = dict(zip(keys, map(float, x0), strict=True))
     est = run["final"]
+    loud = []
     if est["markov.beta"][0] <= 0:
-        warnings.append(f"lkf: beta = {est['markov.beta'][0]:.3g} <= 0 (not mean-reverting)")
+        loud.append(f"lkf (paper variant): beta = {est['markov.beta'][0]:.3g} <= 0 (not "
+                    "mean-reverting): one pass from its linearisation point is badly biased "
+                    "(its std is not a confidence band); use variant relin")
+    at = [k for k in ("markov.beta", "temp.gamma") if k in est and
+          abs(est[k][0] - point[k]) <= 1e-3 * max(abs(point[k]), 1e-12)]
+    if at and not iterate:  # (an iteration ends at its point by construction)
+        loud.append(f"lkf (paper variant): {', '.join(at)} ended at the linearisation "
+                    "point: the pass did not move it (its std is not a confidence band); "
+                    "use variant relin")
+    for w in loud:
+        log.warning("%s", w)
+    warnings += loud
     params = {}
     for n in model.param_names:
         if n in est:
@@ -383,20 +420,23 @@ def lkf(samples: Samples, model: Model, *, beta0: float = PAPER_POINT,
         residual_var=run["f"], warnings=tuple(dict.fromkeys(warnings)),
         source=samples.source, n_samples=len(samples), n_observed=samples.n_observed,
         dt=samples.dt, covariance=run["P"][np.ix_(idx, idx)], cov_names=tuple(names),
-        info={"linearization": point, "passes": state["passes"], "iterated": iterate,
+        info={"variant": "paper", "linearization": point, "passes": state["passes"],
+              "iterated": iterate,
               "settled": settled, "held_from": src, "first_point": first_point,
               "beta_clipped_passes": clipped[0]},
         history=run["history"],
     )
 
 
-def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max):
+def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max,
+                 settle_sigma=1e-3):
     """Re-linearise until the estimate equals the linearisation point: x = g(x).
 
     Plain re-linearisation converges linearly (slowly along the γ/β ridge); every step is
     accelerated with SQUAREM (Varadhan & Roland 2008), falling back to the plain step when
     the extrapolation would make β non-positive. Settled when every parameter moves by less
-    than ``tol`` (relative) or 1e-3 of its std. Returns the last point and its pass.
+    than ``tol`` (relative) or ``settle_sigma`` of its std. Returns the last point and its
+    pass (the last call of ``g`` is at the returned point).
     """
 
     def fix_beta(x_new, x_old):
@@ -409,7 +449,7 @@ def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max):
 
     def small(a, b, s):
         d = np.abs(a - b)
-        return bool(np.all((d <= tol * np.abs(b)) | (d <= 1e-3 * s)))
+        return bool(np.all((d <= tol * np.abs(b)) | (d <= settle_sigma * s)))
 
     x1 = fix_beta(x1, x0)
     while True:
@@ -452,3 +492,115 @@ def _run(f: OnlineLKF, samples: Samples, regs: Mapping[str, np.ndarray]) -> dict
             hist[n + ":std"][k] = s
         hist["drift"][k] = f.drift
     return {"e": e, "f": fv, "history": hist, "final": f.estimates, "P": f.covariance}
+
+
+def _lkf_relin(samples: Samples, model: Model, beta0, gamma0, b0, sigma, held, max_iter,
+               prior_std, soaked) -> FitResult:
+    """The relin variant over a record (see :func:`lkf`)."""
+    from .lkf_relin import RelinLKF
+
+    lkf_layout(model)
+    given = dict(held or {})
+    if sigma is not None:
+        given["markov.sigma"] = float(sigma)
+    samples = prepare(samples, "lkf")
+    require_samples(samples, samples.n_observed, len(lkf_layout(model)) + 2, "lkf")
+    warnings = list(samples.warnings)
+    hv, src = held_values(samples, model, given)
+    point = {"markov.beta": beta0, "temp.gamma": gamma0, "bias.b": b0}
+    start_from = "given"
+    if beta0 is None or not beta0 > 0:
+        fit = _start_fit(samples, model, given)
+        point = {k: (fit.value(k) if v is None and k in model.param_names else v)
+                 for k, v in point.items()}
+        point = {**{k: fit.value(k) for k in model.names_of_kind("linear")},
+                 **{k: v for k, v in point.items() if v is not None}}
+        if not point["markov.beta"] > 0:
+            point["markov.beta"] = 1.0 / max(float(samples.t[-1] - samples.t[0]), samples.dt)
+        start_from = fit.method
+    point = {k: float(v) for k, v in point.items() if v is not None}
+    f = RelinLKF(model, samples.dt, point=point, held=hv, fixed=tuple(given),
+                 relinearize_every=0, soaked=soaked, prior_std=prior_std)
+    regs = _relin_regressors(samples, model, hv, f)
+    y, T = samples.drift, samples.temp
+    first = int(np.flatnonzero(np.isfinite(y))[0])
+    for k in range(first, len(samples)):
+        f.update(float(y[k]), float(T[k]), regs[k] if regs is not None else None)
+    settled = False
+    for _ in range(max(1, max_iter // 6)):
+        noise = dict(f.held)
+        last = f.relinearize()
+        still = [k for k, v in f.held.items() if abs(v - noise[k]) > 1e-4 * max(abs(v), 1e-12)]
+        if last.settled and last.step_sigma <= BATCH_SETTLE_SIGMA and not still:
+            settled = True
+            break
+    if not settled:
+        warnings.append("lkf: the re-linearisation did not settle (point or noise levels "
+                        f"still moving after {f.relinearizations} re-linearisations)")
+    if src != "given":
+        warnings.append("lkf: noise levels not given re-estimated at the fixed point "
+                        f"({', '.join(f'{k}={v:.3g}' for k, v in f.held.items())})")
+    return relin_fit(f, samples, warnings, {"start": start_from, "held_from": src,
+                                            "settled": settled}, first)
+
+
+def _start_fit(samples: Samples, model: Model, given: Mapping[str, float]) -> FitResult:
+    """Start point of the relin batch: least squares, or ML where LSQ cannot represent the
+    model or finds no mean reversion."""
+    if model.is_single_process:
+        from .lsq import lsq
+
+        try:
+            r = lsq(samples, model)
+            if r.value("markov.beta") > 0:
+                return r
+        except GyrostandError as exc:
+            log.info("lkf: no lsq start (%s); using ml", exc)
+    from .ml import ml
+
+    return ml(samples, model, fixed={k: v for k, v in given.items() if k in model.param_names},
+              std_errors=False)
+
+
+def _relin_regressors(samples: Samples, model: Model, hv: Mapping[str, float], f):
+    """The output terms' regressors as ML sees them (centred dT/dt), rows of the samples."""
+    if not f.outputs:
+        return None
+    ctx = context(samples)
+    cols = {}
+    for k in f.outputs:
+        cols.update(TERMS[OUTPUTS[k]]().regressors(hv, ctx))
+    return np.column_stack([cols[k] for k in f.outputs])
+
+
+def relin_fit(f, samples: Samples, warnings: list[str], info: Mapping, first: int = 0,
+              method: str = "lkf") -> FitResult:
+    """A :class:`FitResult` of a :class:`~gyrostand.core.lkf_relin.RelinLKF`'s current
+    state; its bins are those of ``samples`` from ``first`` on (innovations aligned)."""
+    est = f.estimates
+    if est["markov.beta"][0] <= 0:
+        warnings.append(f"lkf: beta = {est['markov.beta'][0]:.3g} <= 0 (not mean-reverting)")
+    params = {}
+    for n in f.model.param_names:
+        if n in est:
+            params[n] = Estimate(est[n][0], est[n][1], f.model.unit(n))
+        else:
+            params[n] = Estimate(f.held[n], 0.0, f.model.unit(n), fixed=True)
+    N = len(samples)
+    e = np.full(N, np.nan)
+    v = np.full(N, np.nan)
+    ee, vv = f.innovations
+    m = min(ee.size, N - first)
+    e[first: first + m] = ee[:m]
+    v[first: first + m] = vv[:m]
+    last = f.last
+    return FitResult(
+        method=method, model=f.model, parameters=params, loglik=None, residuals=e,
+        residual_var=v, warnings=tuple(dict.fromkeys(warnings)), source=samples.source,
+        n_samples=N, n_observed=samples.n_observed, dt=samples.dt,
+        covariance=f.covariance, cov_names=tuple(f.params),
+        info={"variant": "relin", "linearization": dict(zip(
+                  f.params, map(float, f.to_model(f.point)[0]), strict=True)),
+              "relinearizations": f.relinearizations, "passes": f.total_passes,
+              "last_step_sigma": float(last.step_sigma) if last else None,
+              "soaked": f.soaked, **dict(info)})

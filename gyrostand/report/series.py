@@ -183,7 +183,8 @@ def _lkf_pass(samples: Samples, report: Report) -> Convergence:
     held = {k: abs(p[k]) for k in held_names(model)}
     if held.get("markov.sigma", 1.0) <= 0:
         raise GyrostandError("the LKF needs markov.sigma > 0")
-    r = lkf(samples, model, beta0=max(p["markov.beta"], 1e-9), gamma0=p.get("temp.gamma", 0.0),
+    r = lkf(samples, model, variant="paper", beta0=max(p["markov.beta"], 1e-9),
+            gamma0=p.get("temp.gamma", 0.0),
             b0=p.get("bias.b", 0.0), held=held)
     names = [n for n in layout if n in ESTIMATED]
     return Convergence("LKF (one pass linearised at the ML estimate)", samples.t - samples.t[0],

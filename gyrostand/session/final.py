@@ -1,17 +1,21 @@
 """The end of a run: batch fits of every gyro's 1-s series, ``result.json`` and the report.
 
 Each gyro is fitted with its configured identifiers plus ``ml`` (always), on the bins of
-the whole run (time relative to the gyro's first bin, s). ``lkf`` uses the session's
-linearisation point (values the config leaves out come from a fit of the whole record, as
-the online warm-up does on its first bins; so the final fit depends on the samples only) and re-linearises only with ``lkf.iterate: true``. A method that
-fails is recorded with its error; it never stops the others.
+the whole run (time relative to the gyro's first bin, s). ``lkf`` is the online LKF at
+stop (the daemon's filter after a last re-linearisation over every bin: the value the last
+CAN round sends, one meaning in every output); ``lkf_batch`` is the same filter run again
+over ``samples.csv`` to its fixed point (the paper variant: one pass at the session's
+point, values the config leaves out from a fit of the whole record, re-linearised only
+with ``lkf.iterate: true``). A method that fails is recorded with its error; it never
+stops the others.
 
 ``result.json``::
 
     {"session": ..., "source": "live" | "replay of <log>", "run_dir": ..., "dt": 1.0,
      "gyros": {"<gyro>": {"model": [...], "t0": <first bin start, s>,
                           "bins": n, "gaps": n, "observed": n,
-                          "fits": {"lkf": FitResult.to_dict(), "ml": {...},
+                          "fits": {"lkf": FitResult.to_dict(), "lkf_batch": {...},
+                                   "ml": {...},
                                    "lsq": {"error": "..."}},
                           "online": {"lkf": {"status": ..., "parameters": {...}}}}},
      "stats": {decoder, binner, recorder, responses, commands, timing}}
@@ -22,7 +26,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -88,9 +92,15 @@ def samples_of(cols: Mapping[str, Sequence[float]], dt: float,
 
 def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, source: str,
              lkf_point: LkfPoint | None = None,
-             online: Sequence[OnlineEstimate] = ()) -> GyroFinal:
+             online: Sequence[OnlineEstimate] = (),
+             online_lkf: Callable[[Samples], FitResult] | None = None) -> GyroFinal:
     """Run every final method on one gyro's bins, given as the columns of its
-    ``samples.csv`` (errors recorded, never raised)."""
+    ``samples.csv`` (errors recorded, never raised).
+
+    Labels (one meaning each, dbc/README.md): ``lkf`` is the *online* LKF at stop
+    (``online_lkf``, the daemon's filter after its last re-linearisation: the value the
+    last CAN round sends), ``lkf_batch`` the same filter run again over ``samples.csv``
+    to its fixed point. Without ``online_lkf`` (an offline refit) ``lkf`` is the batch."""
     model = Model.parse(gyro.model)
     n = len(cols["t"])
     gaps = sum(1 for a, b in zip(cols["n_drift"], cols["n_temp"], strict=True)
@@ -107,18 +117,42 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
             out.fits[m] = str(exc)
         return out
     out.observed = samples.n_observed
+    errors = (GyrostandError, ValueError, np.linalg.LinAlgError)
     for method in final_methods(gyro):
+        label = method
+        if method == "lkf" and online_lkf is not None:
+            label = "lkf_batch"
+            try:
+                out.fits["lkf"] = online_lkf(samples)
+            except errors as exc:
+                log.warning("gyro %s: the online lkf at stop: %s", gyro.name, exc)
+                out.fits["lkf"] = str(exc)
         try:
             opts: dict[str, Any] = {}
             if method == "lkf":
-                pt = lkf_point or resolve_lkf_point(model, gyro.lkf, samples)
-                opts = {"beta0": pt.beta0, "gamma0": pt.gamma0, "b0": pt.b0,
-                        "held": dict(pt.held), "iterate": gyro.lkf.iterate}
-            out.fits[method] = identify(samples, model, method, **opts)
-        except (GyrostandError, ValueError, np.linalg.LinAlgError) as exc:
-            log.warning("gyro %s: final %s fit failed: %s", gyro.name, method, exc)
-            out.fits[method] = str(exc)
+                opts = _batch_lkf_options(model, gyro, samples, lkf_point)
+            out.fits[label] = identify(samples, model, method, **opts)
+        except errors as exc:
+            log.warning("gyro %s: final %s fit failed: %s", gyro.name, label, exc)
+            out.fits[label] = str(exc)
     return out
+
+
+def _batch_lkf_options(model: Model, gyro: GyroConfig, samples: Samples,
+                       lkf_point: LkfPoint | None) -> dict[str, Any]:
+    """Options of the batch LKF: the paper variant at the session's point (values the file
+    leaves out from a fit of the record); relin from the values the file gives (held
+    fixed), the rest from the record."""
+    c = gyro.lkf
+    if c.variant == "paper":
+        pt = lkf_point or resolve_lkf_point(model, c, samples)
+        return {"variant": "paper", "beta0": pt.beta0, "gamma0": pt.gamma0, "b0": pt.b0,
+                "held": dict(pt.held), "iterate": c.iterate}
+    held = dict(c.held)
+    if c.white_sigma is not None:
+        held["white.sigma"] = c.white_sigma
+    return {"variant": "relin", "beta0": c.beta0, "gamma0": c.gamma0, "b0": c.b0,
+            "sigma": c.sigma, "held": held, "soaked": c.soaked}
 
 
 def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
@@ -142,9 +176,20 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
     write_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
+#: the batch refit's column is left out of the table when it is the online value within
+#: this many stds for every parameter (said in a line below the table)
+SAME_SIGMA = 0.05
+
+
 def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
-    """One gyro's parameters: a column per method (value ± std), truth first if known."""
+    """One gyro's parameters: a column per method (value ± std), truth first if known.
+
+    ``lkf`` is the online LKF at stop (what the last CAN round sent), ``lkf_batch`` the
+    batch refit: shown only where it differs from ``lkf`` by more than ``SAME_SIGMA``."""
     methods = list(final.fits)
+    same = _same_fit(final.fits.get("lkf"), final.fits.get("lkf_batch"))
+    if same:
+        methods.remove("lkf_batch")
     head = f"{'parameter':<14}" + (f" {'truth':>12}" if truth else "")
     head += "".join(f" {m:>24}" for m in methods) + "  unit"
     lines = [head]
@@ -168,6 +213,12 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
         f = final.fits[m]
         rms += f" {f.residual_rms:>24.4g}" if isinstance(f, FitResult) else f" {'—':>24}"
     lines.append(rms)
+    lk = final.fits.get("lkf")
+    if isinstance(lk, FitResult) and lk.info.get("online"):
+        lines.append(f"lkf = the online LKF at stop ({lk.info.get('variant', 'relin')}; "
+                     f"status {lk.info.get('status')}), as sent on the bus"
+                     + ("; lkf_batch (the same filter rerun over samples.csv) agrees "
+                        f"within {SAME_SIGMA:g} std" if same else ""))
     for m in methods:
         f = final.fits[m]
         if isinstance(f, str):
@@ -175,6 +226,22 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
         else:
             lines += [f"{m}: warning: {w}" for w in f.warnings]
     return "\n".join(lines)
+
+
+def _same_fit(a: FitResult | str | None, b: FitResult | str | None) -> bool:
+    """Every parameter of ``b`` within ``SAME_SIGMA`` std of ``a``'s (held ones equal to
+    3 significant digits)."""
+    if not isinstance(a, FitResult) or not isinstance(b, FitResult):
+        return False
+    for n, e in b.parameters.items():
+        o = a.parameters.get(n)
+        if o is None:
+            return False
+        tol = SAME_SIGMA * max(e.std, o.std) if not (e.fixed or o.fixed) else \
+            1e-2 * max(abs(e.value), abs(o.value))
+        if abs(e.value - o.value) > tol:
+            return False
+    return True
 
 
 def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[GyroFinal],

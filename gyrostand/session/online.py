@@ -24,23 +24,29 @@ temperature channel is empty uses the last temperature seen (the batch fit inter
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from ..config import GyroConfig, LkfConfig
 from ..core.data import Samples
 from ..core.identify import identify
-from ..core.lkf import OnlineLKF, held_names, held_values, lkf_layout
+from ..core.lkf import OnlineLKF, held_names, held_values, lkf_layout, relin_fit
+from ..core.lkf_relin import RelinLKF
 from ..core.lsq import OnlineLSQ
 from ..core.lsq import solve as lsq_solve
 from ..core.model import Model
+from ..core.results import Estimate, FitResult
 from ..errors import GyrostandError
 
-__all__ = ["OnlineEstimate", "GyroTracker", "LkfPoint", "resolve_lkf_point", "ONLINE"]
+__all__ = ["OnlineEstimate", "GyroTracker", "LkfPoint", "LkfTrack", "resolve_lkf_point",
+           "ONLINE"]
 
 log = logging.getLogger(__name__)
 
@@ -120,12 +126,47 @@ def resolve_lkf_point(model: Model, cfg: LkfConfig, samples: Samples | None) -> 
                     held, source)
 
 
+#: window of the online consistency check: mean normalised innovation e²/f over the last
+#: this many observed bins (s at Δt = 1 s), tested against its χ² band
+NIS_WINDOW = 300
+#: two-sided probability outside which the window's mean e²/f is a warning
+NIS_ALPHA = 1e-3
+#: mean e²/f beyond which the filter is ``failed`` (its band means nothing)
+NIS_FAIL = 10.0
+#: a re-linearisation that moved a coefficient by more than this many stds: still moving
+STEP_WARN_SIGMA = 3.0
+#: default re-linearisation period, s of bins
+RELINEARIZE_S = 100.0
+
+
+@functools.lru_cache(maxsize=NIS_WINDOW + 1)
+def _nis_band(n: int) -> tuple[float, float]:
+    """Two-sided ``NIS_ALPHA`` band of the mean of ``n`` χ²(1) variables."""
+    return (float(chi2.ppf(NIS_ALPHA / 2, n)) / n, float(chi2.ppf(1 - NIS_ALPHA / 2, n)) / n)
+
+
 @dataclass
-class _LkfTrack:
+class LkfTrack:
+    """The online LKF of one gyro: warm-up, then the configured variant bin by bin.
+
+    ``relin`` (default): :class:`~gyrostand.core.lkf_relin.RelinLKF`, re-linearised every
+    ``lkf.relinearize_every`` bins (default 100 s of bins), held noise levels not given in
+    the session file re-estimated at each re-linearisation. ``paper``: the paper's single
+    pass (:class:`~gyrostand.core.lkf.OnlineLKF`) at the warm-up point.
+
+    Status (:meth:`estimate`): ``failed`` when the filter's innovations are grossly
+    inconsistent (mean e²/f over the last ``NIS_WINDOW`` bins > ``NIS_FAIL``) or not finite;
+    ``warning`` when β ≤ 0, when β's ±3σ band contains 0 (not identified yet), when β sits
+    at a bound, when that mean is outside its χ² band (probability ``NIS_ALPHA``), when the
+    last re-linearisation did not settle or moved a coefficient by more than
+    ``STEP_WARN_SIGMA`` stds (still moving), and for the paper variant always (its estimate
+    is one linearisation step, its band is not a confidence band); else ``ok``.
+    """
+
     model: Model
     cfg: LkfConfig
     dt: float
-    filter: OnlineLKF | None = None
+    filter: OnlineLKF | RelinLKF | None = None
     point: LkfPoint | None = None
     buffered: list[tuple[float, float]] = field(default_factory=list)
     observed: int = 0
@@ -133,6 +174,9 @@ class _LkfTrack:
     e2: float = 0.0
     n_e: int = 0
     failed: str = ""
+    #: e²/f of the last ``NIS_WINDOW`` observed bins, and their running sum
+    nis: deque[float] = field(default_factory=lambda: deque(maxlen=NIS_WINDOW))
+    nis_sum: float = 0.0
 
     def __post_init__(self) -> None:
         lkf_layout(self.model)  # raises ModelError for terms the LKF cannot represent
@@ -140,22 +184,65 @@ class _LkfTrack:
         if not self.cfg.needs_warmup:
             self._start(resolve_lkf_point(self.model, self.cfg, None))
 
+    @property
+    def relinearize_every(self) -> int:
+        every = self.cfg.relinearize_every
+        return int(every) if every is not None else max(1, int(round(RELINEARIZE_S / self.dt)))
+
     def _start(self, point: LkfPoint) -> None:
         self.point = point
-        self.filter = OnlineLKF(self.model, self.dt, beta0=point.beta0, gamma0=point.gamma0,
-                                b0=point.b0, held=point.held)
-        log.info("lkf started: beta0=%.4g gamma0=%.4g b0=%.4g held %s (%s)", point.beta0,
-                 point.gamma0, point.b0, dict(point.held), point.source)
+        if self.cfg.variant == "paper":
+            self.filter = OnlineLKF(self.model, self.dt, beta0=point.beta0,
+                                    gamma0=point.gamma0, b0=point.b0, held=point.held)
+            log.warning("lkf.variant paper: the paper's single pass at a fixed point; its "
+                        "estimate is one linearisation step and its std no confidence band "
+                        "(status: warning); variant relin converges")
+        else:
+            fixed = tuple(self.cfg.held) + tuple(
+                k for k, v in (("markov.sigma", self.cfg.sigma),
+                               ("white.sigma", self.cfg.white_sigma)) if v is not None)
+            self.filter = RelinLKF(
+                self.model, self.dt, held=point.held, fixed=fixed, soaked=self.cfg.soaked,
+                relinearize_every=self.relinearize_every,
+                point={"markov.beta": point.beta0, "temp.gamma": point.gamma0,
+                       "bias.b": point.b0})
+        log.info("lkf (%s) started: beta0=%.4g gamma0=%.4g b0=%.4g held %s (%s)",
+                 self.cfg.variant, point.beta0, point.gamma0, point.b0, dict(point.held),
+                 point.source)
         pending, self.buffered = self.buffered, []
         for y, T in pending:
             self._feed(y, T)
 
     def _feed(self, y: float, T: float) -> None:
-        assert self.filter is not None
-        e, _ = self.filter.update(y, T)
+        f = self.filter
+        assert f is not None
+        if isinstance(f, RelinLKF):
+            n0 = f.n
+            relins = f.relinearizations
+            f.update(y, T)
+            if f.n == n0:
+                return
+            if f.relinearizations != relins:  # the history was re-filtered: new innovations
+                self._refresh_nis()
+                return
+            e, v = f.last_innovation
+        else:
+            e, v = f.update(y, T)
         if math.isfinite(e):
             self.e2 += e * e
             self.n_e += 1
+            if len(self.nis) == NIS_WINDOW:
+                self.nis_sum -= self.nis[0]
+            self.nis.append(e * e / v)
+            self.nis_sum += e * e / v
+
+    def finish(self) -> None:
+        """At stop: a last re-linearisation over the whole record (relin variant), so the
+        online estimate at stop is the filter's fixed point on every bin."""
+        f = self.filter
+        if isinstance(f, RelinLKF) and f.n > 0:
+            f.relinearize()
+            self._refresh_nis()
 
     def update(self, y: float, T: float) -> None:
         if not math.isnan(y):
@@ -186,20 +273,85 @@ class _LkfTrack:
                      self.next_try - self.observed)
             return
         self._start(point)
+        if isinstance(self.filter, RelinLKF) and self.filter.n:
+            self.filter.relinearize()  # at once on the warm-up bins
+            self._refresh_nis()
+
+    def _refresh_nis(self) -> None:
+        """Innovation statistics after the history was re-filtered."""
+        f = self.filter
+        if isinstance(f, RelinLKF):
+            e_all, v_all = f.innovations
+            ok = np.isfinite(e_all)
+            self.nis = deque((e_all[ok] ** 2 / v_all[ok])[-NIS_WINDOW:].tolist(),
+                             maxlen=NIS_WINDOW)
+            self.nis_sum = math.fsum(self.nis)
+            self.e2, self.n_e = float(np.sum(e_all[ok] ** 2)), int(np.sum(ok))
+
+    def status(self, est: Mapping[str, tuple[float, float]]) -> tuple[str, str]:
+        """``(status, reason)`` of the current estimate (see the class docstring)."""
+        f = self.filter
+        assert f is not None
+        fail: list[str] = []
+        warn: list[str] = []
+        if not all(math.isfinite(v) and math.isfinite(s) for v, s in est.values()):
+            fail.append("non-finite estimate")
+        nw = len(self.nis)
+        if nw >= 30:
+            m = self.nis_sum / nw
+            lo, hi = _nis_band(nw)
+            if m > NIS_FAIL:
+                fail.append(f"innovations inconsistent: mean e²/f = {m:.3g} over the last "
+                            f"{nw} bins (expected 1)")
+            elif not lo <= m <= hi:
+                warn.append(f"innovations inconsistent: mean e²/f = {m:.3g} over the last "
+                            f"{nw} bins, outside [{lo:.2f}, {hi:.2f}]")
+        b, sb = est["markov.beta"]
+        if not b > 0:
+            warn.append(f"beta = {b:.3g} <= 0 (not mean-reverting)")
+        elif b - 3 * sb <= 0:
+            warn.append(f"beta not identified yet: its ±3σ band [{b - 3 * sb:.3g}, "
+                        f"{b + 3 * sb:.3g}] contains 0")
+        if isinstance(f, RelinLKF):
+            if b >= 0.99 * f.beta_max:
+                warn.append(f"beta = {b:.3g} at its bound 1/dt")
+            last = f.last
+            if last is not None:
+                if not last.settled:
+                    warn.append(f"last re-linearisation (bin {last.bins}) did not settle in "
+                                f"{last.passes} passes")
+                elif last.noise_at_bound:
+                    warn.append("a noise level reached a bound of its search (e.g. σ_v/σ "
+                                "outside [1e-3, 1e2]): the band may be too narrow")
+                elif last.step_sigma > STEP_WARN_SIGMA:
+                    warn.append(f"estimate still moving: the last re-linearisation (bin "
+                                f"{last.bins}) moved it by {last.step_sigma:.1f} std")
+        else:
+            warn.append("paper variant: one linearisation step at the warm-up point; its "
+                        "std is not a confidence band")
+            lin = {"markov.beta": f.beta0, "temp.gamma": f.gamma0}
+            at = [k for k, v0 in lin.items() if k in est and
+                  abs(est[k][0] - v0) <= 1e-3 * max(abs(v0), 1e-12)]
+            if at:
+                warn.append(f"paper variant: {', '.join(at)} still at the linearisation point")
+        if fail:
+            return "failed", "; ".join(fail + warn)
+        if warn:
+            return "warning", "; ".join(warn)
+        return "ok", ""
 
     def estimate(self) -> OnlineEstimate:
         names = self.model.param_names
-        if self.filter is None or self.filter.k == 0:
+        if self.filter is None or (self.filter.n if isinstance(self.filter, RelinLKF)
+                                   else self.filter.k) == 0:
             note = self.failed or f"warm-up: {self.observed} of {self.cfg.warmup} bins"
             return OnlineEstimate("lkf", "failed" if self.failed else "insufficient_data",
                                   {n: (NAN, NAN) for n in names}, self.observed, NAN, note)
         est = self.filter.estimates
         assert self.point is not None
-        vals = {n: est[n] if n in est else (self.point.held.get(n, NAN), 0.0) for n in names}
-        status = "ok"
-        note = ""
-        if est["markov.beta"][0] <= 0:
-            status, note = "warning", "beta <= 0"
+        held = self.filter.held if isinstance(self.filter, RelinLKF) else self.point.held
+        vals = {n: est[n] if n in est else (held.get(n, NAN), 0.0) for n in names}
+        status, note = self.status(est)
         rms = math.sqrt(self.e2 / self.n_e) if self.n_e else NAN
         return OnlineEstimate("lkf", status, vals, self.observed, rms, note)
 
@@ -249,12 +401,12 @@ class GyroTracker:
 
     def reset(self) -> None:
         """Forget every online estimate; identification restarts at the next bin."""
-        self._tracks: dict[str, _LkfTrack | _LsqTrack] = {}
+        self._tracks: dict[str, LkfTrack | _LsqTrack] = {}
         self._failed: dict[str, str] = {}
         for ident in self.identifiers:
             try:
                 if ident == "lkf":
-                    self._tracks[ident] = _LkfTrack(self.model, self.gyro.lkf, self.dt)
+                    self._tracks[ident] = LkfTrack(self.model, self.gyro.lkf, self.dt)
                 else:
                     self._tracks[ident] = _LsqTrack(self.model, self.dt)
             except GyrostandError as exc:
@@ -283,10 +435,53 @@ class GyroTracker:
                 del self._tracks[ident]
                 self._failed[ident] = f"failed at bin {self.bins}: {exc}"
 
+    def finish(self) -> None:
+        """At stop: the online LKF's last re-linearisation over the whole record, so its
+        estimate at stop (``lkf`` in every output) is its fixed point on every bin."""
+        t = self._tracks.get("lkf")
+        if isinstance(t, LkfTrack):
+            try:
+                t.finish()
+            except Exception:  # the final fit still runs; the online value stays as it was
+                log.exception("gyro %s: the online lkf's last re-linearisation failed",
+                              self.gyro.name)
+        self._cached = None
+
+    def lkf_fit(self, samples: Samples) -> FitResult:
+        """The online LKF's current state as a :class:`FitResult` (``method`` "lkf",
+        ``info["online"]`` true, its status and note), over ``samples`` (the gyro's
+        ``samples.csv``: the filter's bins are its last ones). Raises
+        :class:`GyrostandError` while it has no estimate."""
+        t = self._tracks.get("lkf")
+        if not isinstance(t, LkfTrack):
+            raise GyrostandError(self._failed.get("lkf", "the online lkf is not running"))
+        e = t.estimate()
+        f = t.filter
+        if f is None or e.status in ("insufficient_data",) or (
+                e.status == "failed" and not isinstance(f, RelinLKF | OnlineLKF)):
+            raise GyrostandError(f"the online lkf has no estimate: {e.note}")
+        warnings = [f"lkf (online): {e.status}: {e.note}"] if e.note else []
+        info = {"online": True, "status": e.status, "note": e.note,
+                "point_from": t.point.source if t.point else ""}
+        if isinstance(f, RelinLKF):
+            first = max(len(samples) - f.n, 0)
+            return relin_fit(f, samples, warnings, info, first)
+        est = f.estimates
+        params = {n: (Estimate(est[n][0], est[n][1], self.model.unit(n)) if n in est else
+                      Estimate(f.held[n], 0.0, self.model.unit(n), fixed=True))
+                  for n in self.model.param_names}
+        return FitResult(method="lkf", model=self.model, parameters=params, loglik=None,
+                         residuals=np.full(len(samples), NAN), residual_var=None,
+                         warnings=tuple(warnings), source=samples.source,
+                         n_samples=len(samples), n_observed=samples.n_observed,
+                         dt=samples.dt, info={**info, "variant": "paper",
+                                              "linearization": {"markov.beta": f.beta0,
+                                                                "temp.gamma": f.gamma0}})
+
     @property
     def lkf_point(self) -> LkfPoint | None:
         t = self._tracks.get("lkf")
-        return t.point if isinstance(t, _LkfTrack) else None
+        return t.point if isinstance(t, LkfTrack) else None
 
     def estimates(self) -> list[OnlineEstimate]:
         """Current estimate of every online identifier, in config order (computed once

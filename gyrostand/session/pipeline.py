@@ -480,8 +480,10 @@ class Pipeline:
         for g in self.cfg.gyros:
             cols = read_samples_csv(self.samples.paths[g.name])
             tr = self.trackers[g.name]
+            tr.finish()  # the online LKF's last re-linearisation: `lkf` at stop
             f = fit_gyro(g, cols, self.cfg.sampling.dt,
-                         f"{self.run_dir.name}/{g.name}/samples.csv", None, tr.estimates())
+                         f"{self.run_dir.name}/{g.name}/samples.csv", None, tr.estimates(),
+                         tr.lkf_fit if "lkf" in tr.identifiers else None)
             finals.append(f)
             ml = f.fits.get("ml")
             if ml is not None and not isinstance(ml, str):

@@ -36,7 +36,24 @@ def test_identify_json_contract(method, csv_path, capsys):
         assert set(d["parameters"][name]) >= {"value", "std"}
         assert isinstance(d["parameters"][name]["value"], float)
     assert ("loglik" in d) == (method == "ml")
-    assert abs(d["parameters"]["temp.gamma"]["value"] / -0.01 - 1) < 0.4 or method == "lkf"
+    assert abs(d["parameters"]["temp.gamma"]["value"] / -0.01 - 1) < 0.4
+
+
+def test_identify_lkf_variants(csv_path, capsys):
+    """The default lkf converges (ML's estimate within a fraction of its std); the paper's
+    single pass from 1e-4 stays a named variant that says loudly what is wrong with it."""
+    assert main(["identify", str(csv_path), "--method", "ml", "--json"]) == 0
+    best = json.loads(capsys.readouterr().out)["parameters"]
+    assert main(["identify", str(csv_path), "--method", "lkf", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["info"]["variant"] == "relin" and d["info"]["settled"]
+    for n in ("markov.beta", "temp.gamma", "bias.b"):
+        assert abs(d["parameters"][n]["value"] - best[n]["value"]) <= 0.3 * best[n]["std"], n
+    assert main(["identify", str(csv_path), "--method", "lkf", "--variant", "paper",
+                 "--json"]) == 0
+    p = json.loads(capsys.readouterr().out)
+    assert p["info"]["variant"] == "paper"
+    assert any(w.startswith("lkf (paper variant):") for w in p["warnings"]), p["warnings"]
 
 
 def test_identify_sigma_fixes_markov_sigma(csv_path, capsys):

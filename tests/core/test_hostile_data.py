@@ -85,10 +85,10 @@ def test_lkf_recovers_after_the_gap():
     s = simulate(M, P, chamber_profile(3), seed=5)
     held = {"markov.sigma": 0.1, "white.sigma": 0.01}
     point = {"beta0": 0.03, "gamma0": -0.01, "b0": 0.2}
-    full = lkf(s, M, held=held, **point)
+    full = lkf(s, M, variant="paper", held=held, **point)
     y = s.drift.copy()
     y[3000:6600] = np.nan
-    gap = lkf(Samples.from_arrays(s.t, y, s.temp), M, held=held, **point)
+    gap = lkf(Samples.from_arrays(s.t, y, s.temp), M, variant="paper", held=held, **point)
     for name in ("markov.beta", "temp.gamma"):
         h_gap, h_full = gap.history[name], full.history[name]
         sd = gap.history[name + ":std"]

@@ -173,7 +173,7 @@ def test_run_folder_convergence_comes_from_the_online_estimates(tmp_path):
     model = Model.parse("markov,temp,bias")
     (run / "result.json").write_text(json.dumps(
         {"dt": 1.0, "gyros": {"az": {"model": list(model.names), "t0": t0}}}))
-    r = lkf(s, model, beta0=0.01, gamma0=-5e-4, b0=0.3,
+    r = lkf(s, model, variant="paper", beta0=0.01, gamma0=-5e-4, b0=0.3,
             held={"markov.sigma": 0.05, "white.sigma": 0.02})
     cols = estimate_columns(["lkf"], model.param_names)
     with (run / "az" / "estimates.csv").open("w") as fh:

@@ -44,6 +44,9 @@ def test_simulate_to_a_log_then_replay_it(tmp_path, capsys):
     def fits(doc: dict, result: str) -> dict:  # each fit names its own run folder's file
         out = {}
         for method, fit in doc["gyros"]["az"]["fits"].items():
+            if "error" in fit:  # e.g. the online lkf still in its warm-up (101 bins)
+                out[method] = fit
+                continue
             assert fit.pop("source") == f"{Path(result).parent.name}/az/samples.csv"
             out[method] = fit
         return out

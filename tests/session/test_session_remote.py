@@ -84,7 +84,7 @@ def test_run_process_stops_on_a_command_and_replays_identically(tmp_path, server
     assert doc["stats"]["decoder"]["received"] == len(frames) + 1
     assert doc["stats"]["decoder"]["rejected_total"] == 0
     assert doc["gyros"]["az"]["bins"] == 121
-    assert set(doc["gyros"]["az"]["fits"]) == {"lkf", "lsq", "ml"}
+    assert set(doc["gyros"]["az"]["fits"]) == {"lkf", "lkf_batch", "lsq", "ml"}
     assert "markov.beta" in doc["gyros"]["az"]["fits"]["ml"]["parameters"]
     # the raw log of the process replays to the same 1-s samples, byte for byte
     live = Path(run_dir)

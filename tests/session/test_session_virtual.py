@@ -83,7 +83,7 @@ def test_heartbeat_counts_and_files(live):
     assert "markov.beta" in report and "ml" in report and "frames received" in report
     doc = json.loads(outcome.result_json.read_text())
     g = doc["gyros"]["az"]
-    assert set(g["fits"]) == {"lkf", "lsq", "ml"} and g["bins"] == 2001
+    assert set(g["fits"]) == {"lkf", "lkf_batch", "lsq", "ml"} and g["bins"] == 2001
     assert doc["stats"]["recorder"]["frames"] == stand.sent + 1
     assert doc["stats"]["commands"]["acked"] == 1
 
@@ -96,7 +96,7 @@ def test_replay_of_the_recorded_blf_reproduces_the_run(live, tmp_path, parallel)
     assert (rep.run_dir / "az" / "samples.csv").read_bytes() == a
     live_doc = json.loads(outcome.result_json.read_text())
     rep_doc = json.loads(rep.result_json.read_text())
-    for m in ("lkf", "lsq", "ml"):
+    for m in ("lkf", "lkf_batch", "lsq", "ml"):
         assert rep_doc["gyros"]["az"]["fits"][m]["parameters"] == \
             live_doc["gyros"]["az"]["fits"][m]["parameters"], m
     assert rep_doc["stats"]["decoder"] == live_doc["stats"]["decoder"]

@@ -1,0 +1,231 @@
+"""Accuracy, honesty and cost of the daemon's online LKF, against exact ML (issue 9).
+
+Prints three tables:
+
+1. Monte Carlo of the paper's scenario (2000 s, 20 -> 45 -> 45 -> 35 degC, sigma = 0.1),
+   cases C1, C2, C3, sigma_v in {0, sigma/2}: for beta and gamma, the RMSE and bias (% of
+   the truth) of the online LKF at stop and of ML on the same record, their ratio, the
+   coverage of the truth by the online +-3 std band at every 100-s checkpoint after the
+   warm-up (the minimum over checkpoints), and spread / mean reported std at the end.
+   Targets: RMSE <= 1.1 x ML (C1, C2), <= 1.2 x (C3); bias within 2 pp of ML; coverage
+   >= 0.98; spread / std in 0.9-1.15.
+2. A 6-h chamber-style run (markov, temp, bias, white, temp_rate; ramps and soaks):
+   RMSE of every linear coefficient, online LKF vs ML (target <= 1.2 x).
+3. Cost: a 24-h record (86,400 bins) through the online LKF, per bin, re-linearisations
+   included (target <= 0.3 ms), and the number of re-linearisations and passes.
+
+The online LKF is the daemon's: :class:`gyrostand.session.online.LkfTrack` with the default
+``lkf:`` section (warm-up of 300 bins, then re-linearised every 100 bins, noise levels
+re-estimated), fed bin by bin, then ``finish()`` at stop.
+
+    .venv/bin/python benchmarks/lkf_accuracy.py [--runs 200] [--chamber-runs 40] [--jobs 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import multiprocessing as mp
+import os
+import time
+
+import numpy as np
+
+from gyrostand.config import LkfConfig
+from gyrostand.core.data import Samples
+from gyrostand.core.ml import ml
+from gyrostand.core.model import Model
+from gyrostand.core.profiles import TemperatureProfile, paper_profile
+from gyrostand.core.simulate import simulate
+from gyrostand.session.online import LkfTrack
+
+CASES = {"C1": (0.0333, -0.01), "C2": (0.0333, -0.001), "C3": (0.00055, -0.001)}
+SIGMA = 0.1
+WARMUP = 300
+CHECK_EVERY = 100
+#: checkpoints where ML's band on the record so far is checked too (the early ones)
+ML_CHECKS = (400, 500)
+PAPER_MODEL = Model.parse("markov,temp")
+CHAMBER_MODEL = Model.parse("markov,temp,bias,white,temp_rate")
+CHAMBER_TRUTH = {"markov.beta": 1 / 600, "markov.sigma": 0.05, "temp.gamma": 2e-5,
+                 "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 20.0}
+CHAMBER_PROFILE = TemperatureProfile.from_breakpoints(
+    [(0, 20), (3600, 50), (7200, 50), (9000, 30), (12600, 30), (16200, 60), (18000, 60),
+     (21600, 25)])
+
+
+def online_run(model: Model, samples, checkpoints=()):
+    """The daemon's online LKF over ``samples``: estimates at ``checkpoints`` (bin
+    counts) and at stop, as ``{name: (value, std)}``; also the tracker."""
+    track = LkfTrack(model, LkfConfig(), samples.dt)
+    at = {}
+    cps = set(checkpoints)
+    for k, (y, T) in enumerate(zip(samples.drift, samples.temp, strict=True), start=1):
+        track.update(float(y), float(T))
+        if k in cps and track.filter is not None:
+            e = track.estimate()
+            at[k] = (dict(e.values), e.status)
+    track.finish()
+    e = track.estimate()
+    return at, (dict(e.values), e.status), track
+
+
+def paper_task(task):
+    case, sv, seed = task
+    beta, gamma = CASES[case]
+    truth = {"markov.beta": beta, "markov.sigma": SIGMA, "temp.gamma": gamma,
+             "white.sigma": sv}
+    s = simulate(PAPER_MODEL, truth, paper_profile(), seed=seed)
+    cps = list(range(WARMUP + CHECK_EVERY, len(s) + 1, CHECK_EVERY))
+    at, (final, status), _ = online_run(PAPER_MODEL, s, cps)
+    r = ml(s, PAPER_MODEL)
+    names = ("markov.beta", "temp.gamma")
+    ml_cover = {}
+    for k in ML_CHECKS:  # ML's own ±3 std band on the first k bins, for comparison
+        rk = ml(Samples.from_arrays(s.t[:k], s.drift[:k], s.temp[:k], dt=s.dt,
+                                    source="prefix"), PAPER_MODEL)
+        ml_cover[k] = {n: abs(rk.value(n) - truth[n]) <= 3 * rk.std(n) for n in names}
+    return {"case": case, "sv": sv, "ml_cover": ml_cover,
+            "lkf": {n: final[n] for n in names}, "status": status,
+            "ml": {n: (r.value(n), r.std(n)) for n in names},
+            "cover": {k: {n: abs(v[0][n][0] - truth[n]) <= 3 * v[0][n][1] for n in names}
+                      for k, v in at.items()}}
+
+
+def chamber_task(seed):
+    s = simulate(CHAMBER_MODEL, CHAMBER_TRUTH, CHAMBER_PROFILE, seed=seed)
+    _, (final, status), _ = online_run(CHAMBER_MODEL, s)
+    r = ml(s, CHAMBER_MODEL)
+    lin = ("markov.beta",) + CHAMBER_MODEL.names_of_kind("linear")
+    return {"lkf": {n: final[n] for n in lin}, "status": status,
+            "ml": {n: (r.value(n), r.std(n)) for n in lin}}
+
+
+def stats(vals, true):
+    e = (np.asarray(vals) - true) / abs(true) * 100
+    return float(np.sqrt(np.mean(e * e))), float(np.mean(e))
+
+
+def paper_table(recs):
+    head = ("case", "σv", "param", "LKF RMSE%", "ML RMSE%", "ratio", "LKF bias%", "ML bias%",
+            "min cover", "ML cover", "spread/std (ML)", "ok/warn/fail")
+    rows = []
+    passed = True
+    for case in CASES:
+        beta, gamma = CASES[case]
+        for sv in (0.0, SIGMA / 2):
+            rr = [r for r in recs if r["case"] == case and r["sv"] == sv]
+            if not rr:
+                continue
+            st = [r["status"] for r in rr]
+            counts = f"{st.count('ok')}/{st.count('warning')}/{st.count('failed')}"
+            for n, true in (("markov.beta", beta), ("temp.gamma", gamma)):
+                lv = [r["lkf"][n][0] for r in rr]
+                ls = [r["lkf"][n][1] for r in rr]
+                mv = [r["ml"][n][0] for r in rr]
+                lr, lb = stats(lv, true)
+                mr, mb = stats(mv, true)
+                cps = sorted(rr[0]["cover"])
+                cov = [float(np.mean([r["cover"][k][n] for r in rr])) for k in cps]
+                worst = cps[int(np.argmin(cov))]
+                spread = float(np.std(lv) / np.mean(ls))
+                mls = float(np.std(mv) / np.mean([r["ml"][n][1] for r in rr]))
+                mlc = min(float(np.mean([r["ml_cover"][k][n] for r in rr])) for k in ML_CHECKS)
+                lim = 1.2 if case == "C3" else 1.1
+                ok = (lr <= lim * mr and abs(lb - mb) <= 2.0 and min(cov) >= 0.98
+                      and 0.9 <= spread <= 1.15)
+                passed &= ok
+                rows.append((case, f"{sv:g}", n, f"{lr:.2f}", f"{mr:.2f}", f"{lr / mr:.3f}",
+                             f"{lb:+.2f}", f"{mb:+.2f}", f"{min(cov):.3f} @{worst}",
+                             f"{mlc:.3f}",
+                             f"{spread:.3f} ({mls:.3f})",
+                             counts + ("" if ok else "  <-- target missed")))
+    return _fmt(head, rows), passed
+
+
+def chamber_table(recs):
+    head = ("param", "truth", "LKF RMSE%", "ML RMSE%", "ratio", "LKF bias%", "ML bias%")
+    rows = []
+    passed = True
+    for n, true in CHAMBER_TRUTH.items():
+        if n not in recs[0]["lkf"]:
+            continue
+        lr, lb = stats([r["lkf"][n][0] for r in recs], true)
+        mr, mb = stats([r["ml"][n][0] for r in recs], true)
+        passed &= lr <= 1.2 * mr
+        rows.append((n, f"{true:g}", f"{lr:.2f}", f"{mr:.2f}", f"{lr / mr:.3f}",
+                     f"{lb:+.2f}", f"{mb:+.2f}"))
+    st = [r["status"] for r in recs]
+    return _fmt(head, rows) + (f"\n  status at stop ok/warning/failed: {st.count('ok')}/"
+                               f"{st.count('warning')}/{st.count('failed')}"), passed
+
+
+def cost(hours: float = 24.0):
+    prof = TemperatureProfile.from_breakpoints(
+        [(0, 20), (3 * 3600, 50), (6 * 3600, 50), (9 * 3600, 30), (12 * 3600, 30),
+         (15 * 3600, 60), (18 * 3600, 60), (hours * 3600, 25)])
+    truth = {"markov.beta": 1 / 600, "markov.sigma": 0.05, "temp.gamma": 2e-5,
+             "white.sigma": 0.02}
+    s = simulate(PAPER_MODEL, truth, prof, duration=hours * 3600, seed=7)
+    online_run(PAPER_MODEL, simulate(PAPER_MODEL, truth, paper_profile(), seed=1))  # JIT
+    t = time.perf_counter()
+    _, _, track = online_run(PAPER_MODEL, s)
+    el = time.perf_counter() - t
+    f = track.filter
+    return len(s), el, f.relinearizations, f.total_passes
+
+
+def _fmt(head, rows):
+    w = [max(len(str(x)) for x in col) for col in zip(head, *rows, strict=True)]
+    line = "  " + "  ".join(h.ljust(a) for h, a in zip(head, w, strict=True))
+    out = [line, "  " + "-" * (len(line) - 2)]
+    out += ["  " + "  ".join(str(x).ljust(a) for x, a in zip(r, w, strict=True)) for r in rows]
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=200)
+    ap.add_argument("--chamber-runs", type=int, default=40)
+    ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--cases", default="C1,C2,C3")
+    ap.add_argument("--skip", default="", help="comma list of: paper, chamber, cost")
+    a = ap.parse_args()
+    skip = set(a.skip.split(","))
+    load = os.getloadavg()[0]
+    print(f"lkf_accuracy: {a.runs} runs per cell, {a.chamber_runs} chamber runs, "
+          f"{a.jobs} jobs, load average {load:.2f} on {os.cpu_count()} CPUs")
+    ctx = mp.get_context("fork")
+    ok_all = True
+    with ctx.Pool(a.jobs) as pool:
+        if "paper" not in skip:
+            tasks = [(c, sv, 1000 * i + j) for c in a.cases.split(",") for j, sv in
+                     enumerate((0.0, SIGMA / 2)) for i in range(a.runs)]
+            t = time.perf_counter()
+            recs = pool.map(paper_task, tasks, chunksize=4)
+            txt, ok = paper_table(recs)
+            ok_all &= ok
+            print(f"\n1. paper scenario, online LKF at stop vs ML ({time.perf_counter() - t:.0f} s)"
+                  f"\n   cover = fraction of runs whose +-3 std band holds the truth, minimum "
+                  f"over the checkpoints {WARMUP + CHECK_EVERY}, {WARMUP + 2 * CHECK_EVERY}, "
+                  f"... s; ML cover: ML's own band on the first "
+                  f"{', '.join(map(str, ML_CHECKS))} s (minimum)\n{txt}")
+        if "chamber" not in skip:
+            t = time.perf_counter()
+            recs = pool.map(chamber_task, range(a.chamber_runs), chunksize=2)
+            txt, ok = chamber_table(recs)
+            ok_all &= ok
+            print(f"\n2. 6-h chamber run, {CHAMBER_MODEL} ({time.perf_counter() - t:.0f} s)"
+                  f"\n{txt}")
+    if "cost" not in skip:
+        n, el, relins, passes = cost()
+        per = el / n * 1e3
+        ok_all &= per <= 0.3
+        print(f"\n3. cost: {n} bins (24 h) in {el:.2f} s = {per:.3f} ms per bin "
+              f"(target 0.3 ms: ratio {per / 0.3:.2f}); {relins} re-linearisations, "
+              f"{passes} passes ({passes / max(relins, 1):.1f} per re-linearisation)")
+    print(f"\nall targets met: {ok_all}" + ("" if math.isfinite(load) else ""))
+
+
+if __name__ == "__main__":
+    main()
