@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from ..core.candidates import Report
+from ..core.prederror import ModelError
 from ..workbench import run_diagnose
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
 
@@ -37,6 +38,9 @@ def render(rep: Report, source: str) -> str:
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
              f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
     lines += [f"         - {r}" for r in rep.reasons]
+    if rep.model_error is not None:
+        lines.append("")
+        lines += render_model_error(rep.model_error)
     lines.append("")
     lines.append("parameters (ML)")
     for k, e in rep.fit.parameters.items():
@@ -77,3 +81,35 @@ def render(rep: Report, source: str) -> str:
     for w in rep.fit.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
+
+
+def render_model_error(err: ModelError) -> list[str]:
+    """The headline model error and its table: open loop and h-step, per window."""
+    h = err.headline()
+    u = err.unit
+
+    def f(x: float | None, fmt: str = ".3g") -> str:
+        return "—" if x is None else format(x, fmt)
+
+    lines = [f"model error (open loop: measured − model driven by the temperature alone, "
+             f"{h['window_s']:g}-s means over the run): RMS {f(h['rms'])} {u}, floor "
+             f"{f(h['floor'])} {u} (what the model's own noise leaves), unexplained "
+             f"{f(h['unexplained'])} {u}, fit {f(h['fit_percent'], '.1f')} %"
+             + ("" if h["at_floor"] else "  << above its floor")]
+    lines.append(f"  {'prediction':<12} {'window':>7} {'RMS':>10} {'max':>10} {'floor':>10} "
+                 f"{'unexpl.':>10} {'fit %':>7}")
+    for hs in (0.0, *err.horizons_s):
+        name = "open loop" if hs == 0 else f"{hs:g}-s ahead"
+        for w in err.windows_s:
+            r = err.entries[(hs, w)][0]
+            lines.append(f"  {name:<12} {w:6g}s {f(r['rms']):>10} {f(r['max']):>10} "
+                         f"{f(r['floor']):>10} {f(r['unexplained']):>10} "
+                         f"{f(r['fit_percent'], '.1f'):>7}")
+    w = err.windows_s[0]
+    rows = err.entries[(0.0, w)]
+    if len(rows) > 1:
+        lines.append(f"  open loop per segment ({w:g}-s means, {u}): " + "; ".join(
+            f"{err.ranges[i]['kind']} {err.ranges[i]['t_start']:.0f}–"
+            f"{err.ranges[i]['t_stop']:.0f} s {f(rows[i]['rms'])}"
+            for i in range(1, len(rows)) if rows[i]["rms"] is not None))
+    return lines

@@ -32,11 +32,13 @@ from scipy.stats import chi2
 
 from ..errors import GyrostandError
 from .data import Samples
-from .diagnostics import Diagnosis, diagnose_fit
+from .diagnostics import Diagnosis, diagnose_fit, segments
 from .ml import ml
-from .model import Model
+from .model import Model, context
+from .prederror import ModelError, model_error
 from .results import Estimate, FitResult
 from .terms import TERMS, VOCABULARY
+from .validate import prepare
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +117,7 @@ class Report:
     alpha: float
     look_alikes: tuple[dict[str, Any], ...]
     reasons: tuple[str, ...]
+    model_error: ModelError | None = None
 
     @property
     def significant(self) -> list[Candidate]:
@@ -135,6 +138,7 @@ class Report:
             "look_alikes": [dict(x) for x in self.look_alikes],
             "alpha": self.alpha,
             "warnings": list(self.fit.warnings),
+            **({"model_error": self.model_error.to_dict()} if self.model_error else {}),
         }
 
 
@@ -201,11 +205,19 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
     return out
 
 
+def fit_error(fit: FitResult, samples: Samples, unit: str = "y") -> ModelError:
+    """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
+    used = prepare(samples, "model error")
+    return model_error(fit.model, fit.values, used, segments(context(used)), unit=unit)
+
+
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
-             alpha: float = 0.05, terms: list[str] | None = None) -> Report:
+             alpha: float = 0.05, terms: list[str] | None = None,
+             unit: str = "y") -> Report:
     """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates."""
     fit = base if base is not None else ml(samples, model)
     diag = diagnose_fit(fit, samples)
+    err = fit_error(fit, samples, unit)
     cands = rank_candidates(samples, model, fit, terms)
     m = max(len(cands), 1)
     alpha_each = alpha / m
@@ -217,6 +229,13 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
     if sig:
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} "
                        f"(Bonferroni over {m} candidates: p < {alpha_each:.2g})")
+    if not err.at_floor():
+        h = err.headline()
+        reasons.append(
+            f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
+            f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
+            "the model does not predict the drift from the temperature")
     return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
-                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons))
+                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
+                  model_error=err)

@@ -60,6 +60,7 @@ class _Problem:
         if unknown:
             raise ModelError(f"cannot fix {', '.join(unknown)}: not a parameter of {model}")
         self.ctx = context(samples)
+        self.weights = samples.noise_weights
         self.linear = model.names_of_kind("linear")
         self.lin_free = [n for n in self.linear if n not in self.fixed]
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
@@ -115,7 +116,7 @@ class _Problem:
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
         Y[:, 1:] = X
-        _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        _, _, G, slogf, n = kf_run(phi, q, p0, r, self.weights, Y, False)
         return G, slogf, n
 
     def profile(self, z: np.ndarray):

@@ -26,8 +26,14 @@ def find_spikes(y: np.ndarray, threshold: float = SPIKE_THRESHOLD) -> np.ndarray
 
     Sample k is a spike when y_k − y_{k−1} and y_{k+1} − y_k both exceed ``threshold``
     robust standard deviations (1.4826 · MAD of the first difference), have opposite signs
-    and nearly cancel (the series returns to where it was): a glitch, not a step.
+    and nearly cancel (the series returns to where it was): a glitch, not a step. The
+    neighbours are the nearest *observed* samples, so a spike next to a gap is caught.
     """
+    obs = np.flatnonzero(np.isfinite(y))
+    return obs[_spikes_dense(y[obs], threshold)]
+
+
+def _spikes_dense(y: np.ndarray, threshold: float) -> np.ndarray:
     d = np.diff(y)
     ok = np.isfinite(d)
     if np.count_nonzero(ok) < 10:
@@ -64,5 +70,5 @@ def prepare(samples: Samples, method: str) -> Samples:
     at = ", ".join(f"{samples.t[k]:g}" for k in spikes[:5]) + (" ..." if spikes.size > 5 else "")
     w = (f"{spikes.size} isolated spike(s) > {SPIKE_THRESHOLD:g} robust σ removed from the "
          f"drift (treated as gaps) at t = {at} s")
-    return Samples(t=samples.t, drift=y, temp=samples.temp, dt=samples.dt,
-                   source=samples.source, warnings=(*samples.warnings, w))
+    y.setflags(write=False)
+    return samples.replace(drift=y, warnings=(*samples.warnings, w))

@@ -64,25 +64,44 @@ def _shade_segments(ax: Axes, report: Report, scale: float) -> None:
 
 
 def measured_vs_model(samples: Samples, report: Report, deterministic: np.ndarray) -> Figure:
-    """(a) Measured drift, the one-step prediction and the temperature-driven model part."""
+    """(a) Measured drift and the open-loop model (driven by the temperature alone), the
+    one-step prediction faintly; beneath, the open-loop error's 60-s moving mean with the
+    ±floor band the model's own noise predicts."""
     t = samples.t - samples.t[0]
     tt, xlabel = time_axis(t)
-    fig = Figure(figsize=(WIDTH, 4.6), layout="constrained")
-    ax = fig.add_subplot()
+    unit = report.model_error.unit if report.model_error is not None else "y"
+    fig = Figure(figsize=(WIDTH, 6.0), layout="constrained")
+    ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
     ax.plot(*envelope(tt, samples.drift), color=DATA, lw=0.6, alpha=0.55, label="measured")
-    ax.plot(*envelope(tt, report.diagnosis.fitted), color=PRED, lw=0.6, alpha=0.8,
-            label="model: one-step prediction ŷ(k|k−1)")
+    ax.plot(*envelope(tt, report.diagnosis.fitted), color=PRED, lw=0.5, alpha=0.35,
+            label="one-step prediction ŷ(k|k−1)")
     ax.plot(tt, deterministic, color=MODEL, lw=2.0,
-            label="model: temperature-driven part (no random drift)")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("drift (y)")
+            label="model driven by the temperature alone (open loop, no noise)")
+    ax.set_ylabel(f"drift ({pretty_unit(unit)})")
     ax.set_xlim(tt[0], tt[-1])
     ax.grid(alpha=0.3)
     tw = _temp_twin(ax, tt, samples.temp)
+    err = samples.drift - deterministic
+    w = max(1, int(round(60.0 / samples.dt)))
+    ax_e.plot(*envelope(tt, moving_mean(err, w)), color=MODEL, lw=1.2,
+              label="open-loop error, 60-s moving mean")
+    me = report.model_error
+    title = f"Measured drift and the model {','.join(report.model.names)}"
+    if me is not None and np.isfinite(me.floor):
+        ax_e.axhspan(-me.floor, me.floor, color=PRED, alpha=0.15, lw=0,
+                     label="± floor (the model's own noise, 60-s means)")
+        h = me.headline()
+        title += (f": model error {h['rms']:.3g} {pretty_unit(unit)} "
+                  f"(floor {h['floor']:.3g}, fit {h['fit_percent'] or 0:.1f} %)")
+    ax_e.axhline(0.0, color="black", lw=0.6)
+    ax_e.set_ylabel(f"measured − model ({pretty_unit(unit)})")
+    ax_e.set_xlabel(xlabel)
+    ax_e.grid(alpha=0.3)
+    ax_e.legend(loc="upper right", fontsize=8, frameon=False)
     h1, l1 = ax.get_legend_handles_labels()
     fig.legend(handles=h1 + tw.get_lines()[:1], labels=l1 + ["temperature (right axis)"],
-               loc="outside lower center", ncols=4, fontsize=8, frameon=False)
-    ax.set_title(f"Measured drift and the model {','.join(report.model.names)}")
+               loc="outside lower center", ncols=2, fontsize=8, frameon=False)
+    ax.set_title(title)
     return fig
 
 
@@ -263,14 +282,17 @@ def convergence(conv: Sequence[Convergence], report: Report) -> Figure:
 
 
 def ledger(points: Sequence[LedgerPoint]) -> Figure:
-    """(f) Residual RMS and log-likelihood per model of the ledger: the error falling."""
-    fig = Figure(figsize=(WIDTH, 4.8), layout="constrained")
-    ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
+    """(f) Model error (open loop, 60-s means) with its floor, residual RMS and
+    log-likelihood per model of the ledger: the error falling."""
+    fig = Figure(figsize=(WIDTH, 6.2), layout="constrained")
+    ax0, ax1, ax2 = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 2])
     x = np.arange(len(points))
     real = np.array([not p.what_if for p in points])
+    err = np.array([p.model_error for p in points])
+    floor = np.array([p.floor for p in points])
     rms = np.array([p.rms for p in points])
     ll = np.array([p.loglik for p in points])
-    for ax, y, col in ((ax1, rms, PRED), (ax2, ll, MODEL)):
+    for ax, y, col in ((ax0, err, MODEL), (ax1, rms, PRED), (ax2, ll, DATA)):
         ax.plot(x[real], y[real], color=col, marker="o", ms=7, lw=2)
         if not real.all():  # the what-if point: dashed from the current model, open marker
             k = int(np.flatnonzero(~real)[0])
@@ -278,14 +300,22 @@ def ledger(points: Sequence[LedgerPoint]) -> Figure:
             ax.plot(x[k], y[k], marker="o", ms=8, mfc="white", mec=col, mew=2)
         ax.grid(alpha=0.3)
         ax.margins(x=0.08, y=0.25)
-    for xi, r in zip(x, rms, strict=True):
-        change = f" ({(r / rms[0] - 1) * 100:+.1f} %)" if xi else ""
-        ax1.annotate(f"{r:.4g}{change}", (xi, r), ha="center", va="bottom", fontsize=8,
+    if np.isfinite(floor).any():
+        ax0.plot(x, floor, color=PRED, ls=":", marker="_", ms=12, lw=1.2,
+                 label="floor (the model's own noise)")
+        ax0.legend(loc="upper right", fontsize=8, frameon=False)
+    base = next((v for v in err if np.isfinite(v)), np.nan)
+    for xi, r in zip(x, err, strict=True):
+        if not np.isfinite(r):
+            continue
+        change = f" ({(r / base - 1) * 100:+.0f} %)" if xi and np.isfinite(base) else ""
+        ax0.annotate(f"{r:.3g}{change}", (xi, r), ha="center", va="bottom", fontsize=8,
                      xytext=(0, 6), textcoords="offset points")
-    ax1.set_ylabel("residual RMS (y)")
-    ax1.set_title("The ledger: one point per model, in the order tried"
+    ax0.set_ylabel("model error\n(open loop, 60-s)")
+    ax0.set_title("The ledger: one point per model, in the order tried"
                   + (" (open: what adding the best candidate would give)"
                      if not real.all() else ""))
+    ax1.set_ylabel("innovation RMS")
     ax2.set_ylabel("log-likelihood")
     ax2.set_xticks(x, [_wrap(p.label) for p in points], fontsize=8)
     return fig
