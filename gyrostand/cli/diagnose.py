@@ -38,6 +38,7 @@ def render(rep: Report, source: str) -> str:
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
              f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
     lines += [f"         - {r}" for r in rep.reasons]
+    lines += [f"note     {n}" for n in rep.notes]
     if rep.model_error is not None:
         lines.append("")
         lines += render_model_error(rep.model_error)
@@ -66,9 +67,11 @@ def render(rep: Report, source: str) -> str:
     for c in rep.candidates:
         eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit)}"
                         for k, e in c.effect.items())
-        star = "*" if c.p_value < rep.alpha / m else " "
+        star = "*" if c.ranked and c.p_value < rep.alpha / m else " "
         lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
                      f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
+        if c.note:
+            lines.append(f"  {'':<12} ({c.note})")
     for la in rep.look_alikes:
         lines.append("")
         lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
