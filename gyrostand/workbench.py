@@ -29,7 +29,7 @@ from .core.data import Samples
 from .core.ml import ml
 from .core.model import Model
 from .core.prederror import ModelError
-from .core.results import FitResult
+from .core.results import DRIFT_UNIT, FitResult
 from .errors import DataError, GyrostandError, OutputError
 
 DEFAULT_MODEL = "markov,temp,bias"
@@ -47,7 +47,7 @@ class Subject:
     ledger_path: Path
     run_dir: Path | None
     origin: str  # "run" or "csv"
-    unit: str = "y"
+    unit: str = DRIFT_UNIT  # the drift's unit (deg/h from our DBC)
 
     @property
     def out_dir(self) -> Path:
@@ -105,9 +105,32 @@ def _run_samples(run_dir: Path, gyro: str, dt: float) -> Samples:
     return s.replace(t=t)
 
 
+def _drift_unit(info: dict[str, Any], gyro: str) -> str:
+    """The drift signal's unit in the run's DBC (through its config), else ``y``."""
+    from .config import load_config
+
+    path = info.get("config")
+    if not path:
+        return DRIFT_UNIT
+    try:
+        cfg = load_config(path)
+    except (GyrostandError, OSError, ValueError) as exc:
+        log.info("drift unit unknown (config %s not readable: %s)", path, exc)
+        return DRIFT_UNIT
+    for g in cfg.gyros:
+        if g.name == gyro:
+            return g.drift.signal.unit or DRIFT_UNIT
+    return DRIFT_UNIT
+
+
 def open_subject(path: str | Path, *, gyro: str | None = None,
-                 model: str | Sequence[str] | None = None) -> Subject:
-    """Open a run folder or a CSV as a workbench subject."""
+                 model: str | Sequence[str] | None = None, unit: str | None = None,
+                 dt: float | None = None) -> Subject:
+    """Open a run folder or a CSV as a workbench subject.
+
+    ``unit``: the drift's unit (default: the DBC's, through the run's config; ``y`` for a
+    CSV); ``dt``: a CSV's grid step (default its most common step).
+    """
     path = Path(path)
     if path.is_dir():
         result = path / "result.json"
@@ -130,8 +153,9 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
         configured: Sequence[str] = gyros[gyro].get("model", DEFAULT_MODEL.split(","))
         run_dir: Path | None = path
         origin = "run"
+        unit = unit or _drift_unit(info, gyro)
     elif path.suffix.lower() == ".csv" or path.is_file():
-        samples = Samples.read_csv(path)
+        samples = Samples.read_csv(path, dt=dt)
         gyro = gyro or path.stem
         ledger = path.with_name(path.stem + ".ledger.jsonl")
         configured = DEFAULT_MODEL.split(",")
@@ -145,7 +169,7 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
         steps = [e for e in read_ledger(ledger) if e.get("gyro") == gyro and "model" in e]
         current = Model.parse(steps[-1]["model"] if steps else configured)
     return Subject(samples=samples, model=current, gyro=gyro, ledger_path=ledger,
-                   run_dir=run_dir, origin=origin)
+                   run_dir=run_dir, origin=origin, unit=unit or DRIFT_UNIT)
 
 
 def fit_summary(r: FitResult, error: ModelError | None = None) -> dict[str, Any]:
@@ -215,6 +239,7 @@ class FitStep:
             "after": fit_summary(self.after, self.after_error),
             "lr_stat": self.lr_stat, "df": self.df, "p_value": self.p_value,
             "warnings": list(self.after.warnings),
+            "unit": self.after_error.unit if self.after_error is not None else DRIFT_UNIT,
         }
 
 

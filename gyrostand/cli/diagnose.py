@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
 def render(rep: Report, source: str) -> str:
     d = rep.diagnosis
+    u = rep.unit
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
              f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
     lines += [f"         - {r}" for r in rep.reasons]
@@ -45,13 +46,13 @@ def render(rep: Report, source: str) -> str:
     lines.append("")
     lines.append("parameters (ML)")
     for k, e in rep.fit.parameters.items():
-        lines.append(f"  {k:<16} {fmt_estimate(e.value, e.std, e.unit, e.fixed)}")
+        lines.append(f"  {k:<16} {fmt_estimate(e.value, e.std, e.unit, e.fixed, u)}")
     lines.append("")
-    lines.append(f"residuals: RMS {d.rms:.4g} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
+    lines.append(f"residuals: RMS {d.rms:.4g} {u} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
                  f"p = {d.ljung_box_p:.3g} over {d.lags} lags, normalized innovations "
                  f"{d.nis_mean:.3f} (95 % band {d.nis_band[0]:.3f}–{d.nis_band[1]:.3f})")
     lines.append("")
-    lines.append("per segment of the temperature profile")
+    lines.append(f"per segment of the temperature profile (innovations, {u})")
     lines.append(f"  {'kind':<8} {'t from':>8} {'t to':>8} {'T from':>7} {'T to':>7} "
                  f"{'mean':>10} {'RMS':>10} {'smoothed':>10}")
     for s in d.segments:
@@ -65,7 +66,7 @@ def render(rep: Report, source: str) -> str:
     lines.append(f"  {'term':<12} {'LR':>8} {'df':>3} {'p':>9} {'ΔAIC':>8} {'ΔBIC':>8} "
                  f"{'RMS after':>10}  effect")
     for c in rep.candidates:
-        eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit)}"
+        eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit, False, u)}"
                         for k, e in c.effect.items())
         star = "*" if c.ranked and c.p_value < rep.alpha / m else " "
         lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "

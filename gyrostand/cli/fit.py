@@ -34,12 +34,13 @@ def run(args: argparse.Namespace) -> int:
 
 def render(step: FitStep) -> str:
     b, a = step.before, step.after
+    u = step.after_error.unit if step.after_error is not None else "y"
     lines = [f"{'':<18} {'before':>30}   {'after':>30}",
              f"{'model':<18} {','.join(b.model.names):>30}   {','.join(a.model.names):>30}"]
     for k in dict.fromkeys(list(b.parameters) + list(a.parameters)):
         eb, ea = b.parameters.get(k), a.parameters.get(k)
-        sb = fmt_estimate(eb.value, eb.std, eb.unit, eb.fixed) if eb else "—"
-        sa = fmt_estimate(ea.value, ea.std, ea.unit, ea.fixed) if ea else "—"
+        sb = fmt_estimate(eb.value, eb.std, eb.unit, eb.fixed, u) if eb else "—"
+        sa = fmt_estimate(ea.value, ea.std, ea.unit, ea.fixed, u) if ea else "—"
         lines.append(f"{k:<18} {sb:>30}   {sa:>30}")
     lines.append(f"{'log-likelihood':<18} {b.loglik:>30.3f}   {a.loglik:>30.3f}")
     lines.append(f"{'residual RMS':<18} {b.residual_rms:>30.5g}   {a.residual_rms:>30.5g}")

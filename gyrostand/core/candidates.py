@@ -37,7 +37,7 @@ from .diagnostics import Diagnosis, diagnose_fit, segments
 from .ml import ml
 from .model import Model, context
 from .prederror import ModelError, model_error
-from .results import Estimate, FitResult
+from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
 from .terms import TERMS, VOCABULARY
 from .validate import prepare
 
@@ -117,13 +117,14 @@ class Candidate:
     def ranked(self) -> bool:
         return self.identified and not self.at_bound
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
         return {
             "term": self.term, "lr_stat": self.lr_stat, "df": self.df,
             "p_value": self.p_value, "delta_aic": self.delta_aic,
             "delta_bic": self.delta_bic, "rms_after": self.rms_after,
             "loglik_after": self.loglik_after,
-            "effect": {k: {**e.to_dict(), "unit": e.unit} for k, e in self.effect.items()},
+            "effect": {k: {**e.to_dict(), "unit": unit_text(e.unit, drift_unit)}
+                       for k, e in self.effect.items()},
             "seconds": self.seconds, "ranked": self.ranked, "identified": self.identified,
             "at_bound": list(self.at_bound), "stochastic": self.stochastic,
             "competes": self.competes, "note": self.note,
@@ -144,6 +145,7 @@ class Report:
     reasons: tuple[str, ...]
     model_error: ModelError | None = None
     notes: tuple[str, ...] = ()
+    unit: str = DRIFT_UNIT
 
     @property
     def significant(self) -> list[Candidate]:
@@ -156,12 +158,14 @@ class Report:
             "model": list(self.model.names),
             "adequate": self.adequate,
             "reasons": list(self.reasons),
-            "parameters": {k: e.to_dict() for k, e in self.fit.parameters.items()},
+            "parameters": {k: {**e.to_dict(), "unit": unit_text(e.unit, self.unit)}
+                           for k, e in self.fit.parameters.items()},
+            "unit": self.unit,
             "loglik": self.fit.loglik,
             "residual": {"rms": self.diagnosis.rms,
                          "ljung_box_p": self.diagnosis.ljung_box_p,
                          **self.diagnosis.to_dict()},
-            "candidates": [c.to_dict() for c in self.candidates],
+            "candidates": [c.to_dict(self.unit) for c in self.candidates],
             "look_alikes": [dict(x) for x in self.look_alikes],
             "alpha": self.alpha,
             "warnings": list(self.fit.warnings),
@@ -267,7 +271,7 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
     return out
 
 
-def fit_error(fit: FitResult, samples: Samples, unit: str = "y") -> ModelError:
+def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT) -> ModelError:
     """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
     used = prepare(samples, "model error")
     return model_error(fit.model, fit.values, used, segments(context(used)), unit=unit)
@@ -345,7 +349,7 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
 
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
-             unit: str = "y") -> Report:
+             unit: str = DRIFT_UNIT) -> Report:
     """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
 
     A significant candidate whose effect is not identified sends the current model back to
@@ -392,4 +396,4 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
     return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
                   look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
-                  model_error=err, notes=tuple(notes))
+                  model_error=err, notes=tuple(notes), unit=unit)

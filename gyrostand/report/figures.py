@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from ..core.candidates import Report
 from ..core.data import Samples
 from ..core.diagnostics import allan_deviation
-from ..core.results import UNIT_TEXT
+from ..core.results import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 
 WIDTH = 10.0  # in; at DPI 100 -> 1000 px
@@ -30,12 +30,10 @@ IDENT_COLOURS = ("#1f78b4", "#33a02c", "#6a3d9a", "#ff7f00")
 SCATTER_MAX = 4000
 
 
-def pretty_unit(unit: str) -> str:
-    """A parameter's unit as printed: ``y/(s*degC^2)`` -> ``y/(s·°C²)``."""
-    if unit in UNIT_TEXT:
-        return UNIT_TEXT[unit]
-    return (unit.replace("sqrt(s)", "√s").replace("degC", "°C").replace("^2", "²")
-            .replace("*", "·"))
+def pretty_unit(unit: str, drift: str = DRIFT_UNIT) -> str:
+    """A parameter's unit as printed, in the drift's unit: ``y/(s*degC^2)`` ->
+    ``(deg/h)/(s·°C²)``."""
+    return unit_text(unit, drift)
 
 
 def time_axis(t: np.ndarray) -> tuple[np.ndarray, str]:
@@ -69,7 +67,7 @@ def measured_vs_model(samples: Samples, report: Report, deterministic: np.ndarra
     ±floor band the model's own noise predicts."""
     t = samples.t - samples.t[0]
     tt, xlabel = time_axis(t)
-    unit = report.model_error.unit if report.model_error is not None else "y"
+    unit = report.unit
     fig = Figure(figsize=(WIDTH, 6.0), layout="constrained")
     ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
     ax.plot(*envelope(tt, samples.drift), color=DATA, lw=0.6, alpha=0.55, label="measured")
@@ -125,7 +123,7 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
     ax1.plot(tt, moving_mean(d.innovations, window), color=MODEL, lw=1.8,
              label=f"moving mean over {window * samples.dt:g} s")
     ax1.axhline(0, color="k", lw=0.6)
-    ax1.set_ylabel("innovation (y)")
+    ax1.set_ylabel(f"innovation ({report.unit})")
     ax1.set_title(f"Residuals over time (RMS {d.rms:.3g}; shading: heating red, cooling blue)")
     ax1.legend(loc="upper left", fontsize=8, framealpha=0.85)
     sig_v = report.fit.parameters.get("white.sigma")
@@ -138,7 +136,7 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
     ax2.plot(tt, moving_mean(d.smoothed, window), color=MODEL, lw=1.8,
              label=f"moving mean over {window * samples.dt:g} s")
     ax2.axhline(0, color="k", lw=0.6)
-    ax2.set_ylabel("smoothed residual (y)")
+    ax2.set_ylabel(f"smoothed residual ({report.unit})")
     ax2.set_xlabel(xlabel)
     ax2.set_xlim(tt[0], tt[-1])
     ax2.legend(loc="upper left", fontsize=8, framealpha=0.85)
@@ -162,7 +160,7 @@ def residual_vs_inputs(samples: Samples, report: Report, rate: np.ndarray,
     pick = np.sort(rng.choice(n, SCATTER_MAX, replace=False)) if n > SCATTER_MAX else slice(None)
     xs = {"dT/dt (°C/min)": rate * 60.0, "temperature T (°C)": np.asarray(samples.temp)}
     ys = {"standardized innovation": d.standardized,
-          "y − temperature-driven part (y)": samples.drift - deterministic}
+          f"y − temperature-driven part ({report.unit})": samples.drift - deterministic}
     fig = Figure(figsize=(WIDTH, 6.6), layout="constrained")
     axes = fig.subplots(2, 2, sharey="row")
     for i, (ylab, y) in enumerate(ys.items()):
@@ -270,7 +268,7 @@ def convergence(conv: Sequence[Convergence], report: Report) -> Figure:
             pad = 0.08 * (hi - lo) if hi > lo else abs(lo) * 0.1 + 1e-12
             ax.set_ylim(lo - pad, hi + pad)
         unit = report.model.unit(name) if name in report.model.param_names else ""
-        unit = pretty_unit(unit)
+        unit = pretty_unit(unit, report.unit)
         ax.set_title(f"{name}" + (f" ({unit})" if unit else ""), fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=7, framealpha=0.85)
@@ -351,7 +349,7 @@ def allan(report: Report, dt: float) -> Figure:
     ax.plot([], [], color="k", ls=":", lw=1, label="white noise (slope −½)")
     ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("averaging time τ (s)")
-    ax.set_ylabel("σ(τ) (y)")
+    ax.set_ylabel(f"σ(τ) ({report.unit})")
     ax.grid(which="both", alpha=0.3)
     ax.set_title("Allan deviation of the residuals")
     return fig

@@ -201,8 +201,8 @@ def _num(x: float | None, fmt: str = ".4g") -> str:
     return format(float(x), fmt)
 
 
-def _unit(u: str) -> str:
-    return pretty_unit(u)
+def _unit(u: str, drift: str) -> str:
+    return pretty_unit(u, drift)
 
 
 def _table(head: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1,
@@ -241,7 +241,9 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
         f"{len(s)} samples every {s.dt:g} s over {dur / 3600:.2f} h, "
         f"{len(s) - s.n_observed} gaps; temperature {float(np.min(s.temp)):.2f} to "
         f"{float(np.max(s.temp)):.2f} °C. Model <code>{_e(model)}</code>. "
-        f"Drift unit y (as recorded, e.g. °/h). Written {now} by gyrostand {__version__}.</p>",
+        f"Drift unit {_e(rep.unit)}"
+        + (" (not named: give it with --unit)" if rep.unit == "y" else " (from the DBC or "
+           "--unit)") + f". Written {now} by gyrostand {__version__}.</p>",
     ]
     # verdict
     out.append("<h2>Verdict</h2>")
@@ -269,12 +271,12 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
     # parameters and residual statistics
     out.append("<h2>Parameters (maximum likelihood)</h2>")
     rows = [[f"<code>{_e(k)}</code>", _num(e.value, ".6g"),
-             "fixed" if e.fixed else _num(e.std, ".3g"), _e(_unit(e.unit))]
+             "fixed" if e.fixed else _num(e.std, ".3g"), _e(_unit(e.unit, rep.unit))]
             for k, e in fit.parameters.items()]
     out.append(_table(["parameter", "value", "± std", "unit"], rows, left=1))
     out.append(_table(["residual statistic", "value"], [
-        ["innovation RMS (y)", _num(d.rms)],
-        ["smoothed-residual RMS (y)", _num(d.smoothed_rms)],
+        [f"innovation RMS ({_e(rep.unit)})", _num(d.rms)],
+        [f"smoothed-residual RMS ({_e(rep.unit)})", _num(d.smoothed_rms)],
         ["log-likelihood", _num(fit.loglik, ".6g")],
         [f"Ljung–Box Q over {d.lags} lags", _num(d.ljung_box_q)],
         ["Ljung–Box p (white when ≥ 0.01)", _num(d.ljung_box_p, ".3g")],
@@ -305,7 +307,7 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
     rows, classes = [], []
     for i, c in enumerate(rep.candidates, start=1):
         eff = "<br>".join(f"<code>{_e(k)}</code> = {_num(e.value, '.4g')} ± "
-                          f"{_num(e.std, '.2g')} {_e(_unit(e.unit))}"
+                          f"{_num(e.std, '.2g')} {_e(_unit(e.unit, rep.unit))}"
                           for k, e in c.effect.items())
         rows.append([f"{i}. {'★ ' if c.term in sig else ''}<code>{_e(c.term)}</code>",
                      _num(c.lr_stat, ".2f"), str(c.df), _num(c.p_value, ".2g"),

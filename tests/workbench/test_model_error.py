@@ -127,3 +127,20 @@ def test_a_one_frame_first_bin_is_weighted_not_an_outlier(tmp_path):
     rep = run_diagnose(open_subject(path), record=False)
     assert rep.adequate, (rep.reasons, [(c.term, c.p_value) for c in rep.candidates[:3]])
     assert {c.term: c for c in rep.candidates}["warmup"].p_value > 10 * level
+
+
+def test_units_come_from_unit_and_reach_tables_json_and_plots(tmp_path, capsys):
+    path = chamber_run(tmp_path, ["temp_rate"], VISIBLE["temp_rate"], seed=100)
+    assert main(["diagnose", str(path), "--unit", "deg/h", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["unit"] == "deg/h" and d["model_error"]["unit"] == "deg/h"
+    assert d["parameters"]["temp.gamma"]["unit"] == "(deg/h)/(s·°C)"
+    assert d["parameters"]["bias.b"]["unit"] == "deg/h"
+    eff = {c["term"]: c["effect"] for c in d["candidates"]}
+    assert eff["temp_rate"]["temp_rate.k"]["unit"] == "(deg/h)·s/°C"
+    assert main(["fit", str(path), "--unit", "deg/h", "--add", "temp_rate"]) == 0
+    out = capsys.readouterr().out
+    assert "(deg/h)·s/°C" in out and " y " not in out and "deg/h" in out
+    assert main(["fit", str(path), "--unit", "deg/h", "--remove", "temp_rate",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["unit"] == "deg/h"
