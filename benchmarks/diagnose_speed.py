@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from gyrostand.core.candidates import rank_candidates
+from gyrostand.core.candidates import diagnose, fit_error, rank_candidates
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnostics import diagnose_fit
 from gyrostand.core.ml import ml
@@ -45,13 +45,22 @@ def main() -> None:
     t2 = time.perf_counter()
     cands = rank_candidates(s, m, fit)
     t3 = time.perf_counter()
-    total = t3 - t0
+    err = fit_error(fit, s)
+    t4 = time.perf_counter()
+    total = t4 - t0
     print(f"ML fit of the current model   {t1 - t0:7.2f} s")
     print(f"residual diagnostics          {t2 - t1:7.2f} s  (Ljung-Box p {diag.ljung_box_p:.3g})")
+    print(f"model error and its floor     {t4 - t3:7.2f} s  (open loop {err.rms:.4g}, floor "
+          f"{err.floor:.4g})")
     print(f"candidate refits ({len(cands)})         {t3 - t2:7.2f} s")
     for c in sorted(cands, key=lambda c: -c.seconds):
         print(f"    {c.term:<12} {c.seconds:6.2f} s   LR {c.lr_stat:8.2f}  p {c.p_value:.2g}")
     print(f"ranked first: {cands[0].term}")
+    t5 = time.perf_counter()
+    rep = diagnose(s, m, base=fit)
+    print(f"whole diagnose() from the fit (candidates, identification, competitors, model "
+          f"error): {time.perf_counter() - t5:.2f} s; proposed first: "
+          f"{rep.significant[0].term if rep.significant else 'nothing'}")
     print(f"total diagnose {total:.2f} s = {total / ANCHOR_S:.2f} x the {ANCHOR_S:.0f}-s anchor "
           f"({'PASS' if total < ANCHOR_S else 'MISS'}); "
           f"mean per candidate {(t3 - t2) / len(cands):.2f} s")

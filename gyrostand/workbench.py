@@ -24,11 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from .core.candidates import Report, diagnose
+from .core.candidates import Report, diagnose, fit_error
 from .core.data import Samples
 from .core.ml import ml
 from .core.model import Model
-from .core.results import FitResult
+from .core.prederror import ModelError
+from .core.results import DRIFT_UNIT, FitResult
 from .errors import DataError, GyrostandError, OutputError
 
 DEFAULT_MODEL = "markov,temp,bias"
@@ -46,6 +47,7 @@ class Subject:
     ledger_path: Path
     run_dir: Path | None
     origin: str  # "run" or "csv"
+    unit: str = DRIFT_UNIT  # the drift's unit (deg/h from our DBC)
 
     @property
     def out_dir(self) -> Path:
@@ -98,12 +100,37 @@ def _run_samples(run_dir: Path, gyro: str, dt: float) -> Samples:
         raise DataError(f"{run_dir}: no samples for gyro {gyro!r} ({path} is missing)")
     s = Samples.read_csv(path, dt=dt)
     # time from the first bin (the run's absolute epoch times are kept in the file)
-    return Samples.from_arrays(s.t - s.t[0], s.drift, s.temp, dt=s.dt, source=str(path))
+    t = s.t - s.t[0]
+    t.setflags(write=False)
+    return s.replace(t=t)
+
+
+def _drift_unit(info: dict[str, Any], gyro: str) -> str:
+    """The drift signal's unit in the run's DBC (through its config), else ``y``."""
+    from .config import load_config
+
+    path = info.get("config")
+    if not path:
+        return DRIFT_UNIT
+    try:
+        cfg = load_config(path)
+    except (GyrostandError, OSError, ValueError) as exc:
+        log.info("drift unit unknown (config %s not readable: %s)", path, exc)
+        return DRIFT_UNIT
+    for g in cfg.gyros:
+        if g.name == gyro:
+            return g.drift.signal.unit or DRIFT_UNIT
+    return DRIFT_UNIT
 
 
 def open_subject(path: str | Path, *, gyro: str | None = None,
-                 model: str | Sequence[str] | None = None) -> Subject:
-    """Open a run folder or a CSV as a workbench subject."""
+                 model: str | Sequence[str] | None = None, unit: str | None = None,
+                 dt: float | None = None) -> Subject:
+    """Open a run folder or a CSV as a workbench subject.
+
+    ``unit``: the drift's unit (default: the DBC's, through the run's config; ``y`` for a
+    CSV); ``dt``: a CSV's grid step (default its most common step).
+    """
     path = Path(path)
     if path.is_dir():
         result = path / "result.json"
@@ -126,8 +153,9 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
         configured: Sequence[str] = gyros[gyro].get("model", DEFAULT_MODEL.split(","))
         run_dir: Path | None = path
         origin = "run"
+        unit = unit or _drift_unit(info, gyro)
     elif path.suffix.lower() == ".csv" or path.is_file():
-        samples = Samples.read_csv(path)
+        samples = Samples.read_csv(path, dt=dt)
         gyro = gyro or path.stem
         ledger = path.with_name(path.stem + ".ledger.jsonl")
         configured = DEFAULT_MODEL.split(",")
@@ -141,26 +169,37 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
         steps = [e for e in read_ledger(ledger) if e.get("gyro") == gyro and "model" in e]
         current = Model.parse(steps[-1]["model"] if steps else configured)
     return Subject(samples=samples, model=current, gyro=gyro, ledger_path=ledger,
-                   run_dir=run_dir, origin=origin)
+                   run_dir=run_dir, origin=origin, unit=unit or DRIFT_UNIT)
 
 
-def fit_summary(r: FitResult, smoothed_rms: float | None = None) -> dict[str, Any]:
-    d = {"rms": r.residual_rms, "loglik": r.loglik, "model": list(r.model.names),
-         "n_params": len(r.model.param_names)}
-    if smoothed_rms is not None:
-        d["smoothed_rms"] = smoothed_rms
+def fit_summary(r: FitResult, error: ModelError | None = None) -> dict[str, Any]:
+    """One fit in a before/after: innovation RMS, ln L, model, and the model error
+    (open-loop RMS of 60-s means over the run) with the floor the model predicts."""
+    d: dict[str, Any] = {"rms": r.residual_rms, "loglik": r.loglik,
+                         "model": list(r.model.names), "n_params": len(r.model.param_names)}
+    if error is not None:
+        d["model_error"] = _finite(error.rms)
+        d["model_error_floor"] = _finite(error.floor)
+        d["model_error_unit"] = error.unit
     return d
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def run_diagnose(subject: Subject, *, record: bool = True) -> Report:
     """Diagnose the subject's current model; append the step to the ledger."""
-    rep = diagnose(subject.samples, subject.model)
+    rep = diagnose(subject.samples, subject.model, unit=subject.unit)
     if record:
+        err = rep.model_error
         try:
             append_ledger(subject.ledger_path, {
                 "gyro": subject.gyro, "action": "diagnose",
                 "model": list(subject.model.names),
                 "rms": rep.diagnosis.rms, "loglik": rep.fit.loglik, "adequate": rep.adequate,
+                **({"model_error": _finite(err.rms), "model_error_floor": _finite(err.floor)}
+                   if err is not None else {}),
                 "ljung_box_p": rep.diagnosis.ljung_box_p,
                 "best_candidate": rep.candidates[0].term if rep.candidates else None,
                 "parameters": {k: e.to_dict() for k, e in rep.fit.parameters.items()},
@@ -181,15 +220,26 @@ class FitStep:
     lr_stat: float
     df: int
     p_value: float
+    before_error: ModelError | None = None
+    after_error: ModelError | None = None
+
+    @property
+    def bigger_is_after(self) -> bool:
+        """True when the test is of the added terms (the new model is the bigger one)."""
+        return self.df > 0 or (self.df == 0 and bool(self.added))
 
     def to_dict(self) -> dict[str, Any]:
+        """``lr_stat`` = 2 (ln L_bigger − ln L_smaller), the test of the smaller model
+        (positive when the bigger model fits better, whichever way the step went)."""
         return {
             "model": list(self.after.model.names),
             "added": list(self.added), "removed": list(self.removed),
             "parameters": {k: e.to_dict() for k, e in self.after.parameters.items()},
-            "before": fit_summary(self.before), "after": fit_summary(self.after),
+            "before": fit_summary(self.before, self.before_error),
+            "after": fit_summary(self.after, self.after_error),
             "lr_stat": self.lr_stat, "df": self.df, "p_value": self.p_value,
             "warnings": list(self.after.warnings),
+            "unit": self.after_error.unit if self.after_error is not None else DRIFT_UNIT,
         }
 
 
@@ -209,15 +259,15 @@ def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (
     after = ml(subject.samples, new, start=before.values)
     assert before.loglik is not None and after.loglik is not None
     df = len(new.param_names) - len(subject.model.param_names)
+    # the test of the smaller model against the bigger one: LR = 2 (ln L_big − ln L_small)
     lr = 2.0 * (after.loglik - before.loglik)
-    if df > 0:
-        p = float(chi2.sf(max(lr, 0.0), df))
-    elif df < 0:
-        p = float(chi2.sf(max(-lr, 0.0), -df))
-    else:
-        p = float("nan")
+    if df < 0 or (df == 0 and not add):
+        lr = -lr
+    p = float(chi2.sf(max(lr, 0.0), abs(df))) if df else float("nan")
     step = FitStep(before=before, after=after, added=tuple(add), removed=tuple(remove),
-                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0)
+                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0,
+                   before_error=fit_error(before, subject.samples, subject.unit),
+                   after_error=fit_error(after, subject.samples, subject.unit))
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

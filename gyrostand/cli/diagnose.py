@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from ..core.candidates import Report
+from ..core.prederror import ModelError
 from ..workbench import run_diagnose
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
 
@@ -34,19 +35,24 @@ def run(args: argparse.Namespace) -> int:
 
 def render(rep: Report, source: str) -> str:
     d = rep.diagnosis
+    u = rep.unit
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
              f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
     lines += [f"         - {r}" for r in rep.reasons]
+    lines += [f"note     {n}" for n in rep.notes]
+    if rep.model_error is not None:
+        lines.append("")
+        lines += render_model_error(rep.model_error)
     lines.append("")
     lines.append("parameters (ML)")
     for k, e in rep.fit.parameters.items():
-        lines.append(f"  {k:<16} {fmt_estimate(e.value, e.std, e.unit, e.fixed)}")
+        lines.append(f"  {k:<16} {fmt_estimate(e.value, e.std, e.unit, e.fixed, u)}")
     lines.append("")
-    lines.append(f"residuals: RMS {d.rms:.4g} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
+    lines.append(f"residuals: RMS {d.rms:.4g} {u} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
                  f"p = {d.ljung_box_p:.3g} over {d.lags} lags, normalized innovations "
                  f"{d.nis_mean:.3f} (95 % band {d.nis_band[0]:.3f}–{d.nis_band[1]:.3f})")
     lines.append("")
-    lines.append("per segment of the temperature profile")
+    lines.append(f"per segment of the temperature profile (innovations, {u})")
     lines.append(f"  {'kind':<8} {'t from':>8} {'t to':>8} {'T from':>7} {'T to':>7} "
                  f"{'mean':>10} {'RMS':>10} {'smoothed':>10}")
     for s in d.segments:
@@ -60,11 +66,13 @@ def render(rep: Report, source: str) -> str:
     lines.append(f"  {'term':<12} {'LR':>8} {'df':>3} {'p':>9} {'ΔAIC':>8} {'ΔBIC':>8} "
                  f"{'RMS after':>10}  effect")
     for c in rep.candidates:
-        eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit)}"
+        eff = "; ".join(f"{k} = {fmt_estimate(e.value, e.std, e.unit, False, u)}"
                         for k, e in c.effect.items())
-        star = "*" if c.p_value < rep.alpha / m else " "
+        star = "*" if c.ranked and c.p_value < rep.alpha / m else " "
         lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
                      f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
+        if c.note:
+            lines.append(f"  {'':<12} ({c.note})")
     for la in rep.look_alikes:
         lines.append("")
         lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
@@ -77,3 +85,35 @@ def render(rep: Report, source: str) -> str:
     for w in rep.fit.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
+
+
+def render_model_error(err: ModelError) -> list[str]:
+    """The headline model error and its table: open loop and h-step, per window."""
+    h = err.headline()
+    u = err.unit
+
+    def f(x: float | None, fmt: str = ".3g") -> str:
+        return "—" if x is None else format(x, fmt)
+
+    lines = [f"model error (open loop: measured − model driven by the temperature alone, "
+             f"{h['window_s']:g}-s means over the run): RMS {f(h['rms'])} {u}, floor "
+             f"{f(h['floor'])} {u} (what the model's own noise leaves), unexplained "
+             f"{f(h['unexplained'])} {u}, fit {f(h['fit_percent'], '.1f')} %"
+             + ("" if h["at_floor"] else "  << above its floor")]
+    lines.append(f"  {'prediction':<12} {'window':>7} {'RMS':>10} {'max':>10} {'floor':>10} "
+                 f"{'unexpl.':>10} {'fit %':>7}")
+    for hs in (0.0, *err.horizons_s):
+        name = "open loop" if hs == 0 else f"{hs:g}-s ahead"
+        for w in err.windows_s:
+            r = err.entries[(hs, w)][0]
+            lines.append(f"  {name:<12} {w:6g}s {f(r['rms']):>10} {f(r['max']):>10} "
+                         f"{f(r['floor']):>10} {f(r['unexplained']):>10} "
+                         f"{f(r['fit_percent'], '.1f'):>7}")
+    w = err.windows_s[0]
+    rows = err.entries[(0.0, w)]
+    if len(rows) > 1:
+        lines.append(f"  open loop per segment ({w:g}-s means, {u}): " + "; ".join(
+            f"{err.ranges[i]['kind']} {err.ranges[i]['t_start']:.0f}–"
+            f"{err.ranges[i]['t_stop']:.0f} s {f(rows[i]['rms'])}"
+            for i in range(1, len(rows)) if rows[i]["rms"] is not None))
+    return lines

@@ -14,14 +14,21 @@ def add_subject_args(p: Any) -> None:
     p.add_argument("--model", default=None,
                    help="start from this model (comma-separated terms) instead of the "
                         "run's current one; default for a CSV: markov,temp,bias")
+    p.add_argument("--unit", default=None,
+                   help="the drift's unit (default: the DBC's for a run, 'y' for a CSV)")
+    p.add_argument("--dt", type=float, default=None,
+                   help="a CSV's sampling step in s (default: its most common step; "
+                        "missing rows are gaps)")
 
 
 def subject_of(args: argparse.Namespace) -> Subject:
-    return open_subject(args.run, gyro=args.gyro, model=args.model)
+    return open_subject(args.run, gyro=args.gyro, model=args.model,
+                        unit=getattr(args, "unit", None), dt=getattr(args, "dt", None))
 
 
-def fmt_estimate(value: float, std: float, unit: str, fixed: bool = False) -> str:
-    from ..core.results import UNIT_TEXT
+def fmt_estimate(value: float, std: float, unit: str, fixed: bool = False,
+                 drift_unit: str = "y") -> str:
+    from ..core.results import unit_text
 
     sd = "fixed" if fixed else f"± {std:.3g}"
-    return f"{value:.6g} {sd} {UNIT_TEXT.get(unit, unit)}"
+    return f"{value:.6g} {sd} {unit_text(unit, drift_unit)}"

@@ -22,6 +22,7 @@ number of candidates tried.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -30,16 +31,22 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from ..errors import GyrostandError
+from ..errors import DataError, GyrostandError
 from .data import Samples
-from .diagnostics import Diagnosis, diagnose_fit
+from .diagnostics import Diagnosis, diagnose_fit, segments
 from .ml import ml
-from .model import Model
-from .results import Estimate, FitResult
+from .model import Model, context
+from .prederror import ModelError, model_error
+from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
 from .terms import TERMS, VOCABULARY
+from .validate import prepare
 
 log = logging.getLogger(__name__)
 
+#: fewest observed samples a diagnosis judges (Ljung–Box lags, candidate refits)
+MIN_DIAGNOSE_SAMPLES = 30
+#: ln L rise that shows the current fit was not at its maximum
+REFIT_GAIN = 0.05
 #: candidates whose null hypothesis lies on the boundary (p-value halved)
 BOUNDARY = {"random_walk"}
 #: candidates with a parameter unidentified under the null: one more df in the p-value
@@ -78,7 +85,16 @@ FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, st
 
 @dataclass(frozen=True)
 class Candidate:
-    """One candidate term, refitted."""
+    """One candidate term, refitted.
+
+    ``df`` is the degrees of freedom of the p-value (the parameters the term adds, plus one
+    for a parameter not identified under the null). A candidate is *ranked* — can be
+    significant — only when its own effect is identified (``identified``: every linear
+    parameter it adds has |estimate| ≥ 2 std and no flat direction involves it) and no
+    time constant or rate of it sits at a search bound (``at_bound``). ``stochastic`` marks
+    a random process (markov2, random_walk); ``competes`` names the candidate of the other
+    kind that explains the same failure, ``note`` says why one is not ranked.
+    """
 
     term: str
     lr_stat: float
@@ -91,15 +107,27 @@ class Candidate:
     effect: dict[str, Estimate]
     seconds: float
     result: FitResult | None = field(default=None, compare=False, repr=False)
+    identified: bool = True
+    at_bound: tuple[str, ...] = ()
+    stochastic: bool = False
+    competes: str | None = None
+    note: str = ""
 
-    def to_dict(self) -> dict[str, Any]:
+    @property
+    def ranked(self) -> bool:
+        return self.identified and not self.at_bound
+
+    def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
         return {
             "term": self.term, "lr_stat": self.lr_stat, "df": self.df,
             "p_value": self.p_value, "delta_aic": self.delta_aic,
             "delta_bic": self.delta_bic, "rms_after": self.rms_after,
             "loglik_after": self.loglik_after,
-            "effect": {k: {**e.to_dict(), "unit": e.unit} for k, e in self.effect.items()},
-            "seconds": self.seconds,
+            "effect": {k: {**e.to_dict(), "unit": unit_text(e.unit, drift_unit)}
+                       for k, e in self.effect.items()},
+            "seconds": self.seconds, "ranked": self.ranked, "identified": self.identified,
+            "at_bound": list(self.at_bound), "stochastic": self.stochastic,
+            "competes": self.competes, "note": self.note,
         }
 
 
@@ -115,26 +143,34 @@ class Report:
     alpha: float
     look_alikes: tuple[dict[str, Any], ...]
     reasons: tuple[str, ...]
+    model_error: ModelError | None = None
+    notes: tuple[str, ...] = ()
+    unit: str = DRIFT_UNIT
 
     @property
     def significant(self) -> list[Candidate]:
+        """Ranked candidates significant after Bonferroni, in the order proposed."""
         m = max(len(self.candidates), 1)
-        return [c for c in self.candidates if c.p_value < self.alpha / m]
+        return [c for c in self.candidates if c.ranked and c.p_value < self.alpha / m]
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "model": list(self.model.names),
             "adequate": self.adequate,
             "reasons": list(self.reasons),
-            "parameters": {k: e.to_dict() for k, e in self.fit.parameters.items()},
+            "parameters": {k: {**e.to_dict(), "unit": unit_text(e.unit, self.unit)}
+                           for k, e in self.fit.parameters.items()},
+            "unit": self.unit,
             "loglik": self.fit.loglik,
             "residual": {"rms": self.diagnosis.rms,
                          "ljung_box_p": self.diagnosis.ljung_box_p,
                          **self.diagnosis.to_dict()},
-            "candidates": [c.to_dict() for c in self.candidates],
+            "candidates": [c.to_dict(self.unit) for c in self.candidates],
             "look_alikes": [dict(x) for x in self.look_alikes],
             "alpha": self.alpha,
             "warnings": list(self.fit.warnings),
+            **({"model_error": self.model_error.to_dict()} if self.model_error else {}),
+            "notes": list(self.notes),
         }
 
 
@@ -148,7 +184,29 @@ def candidate_terms(model: Model) -> list[str]:
 def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
     """ML fit of ``model``, started from ``base`` where it shares parameters."""
     return ml(samples, model, start=base.values if base is not None else None,
-              n_local=2 if base is not None else None)
+              n_local=2 if base is not None else None, hessian_passes=1)
+
+
+def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:
+    """Whether the effect a candidate adds is identified, and which of its time constants
+    or rates sit at a search bound (then the optimum is not an interior one)."""
+    ok = True
+    for k in new:
+        e = r.parameters[k]
+        if model.kind(k) == "linear" and not abs(e.value) >= 2.0 * e.std:
+            ok = False
+    if not any(model.kind(k) == "linear" for k in new):
+        # an effect without a linear amplitude (a lag): its own parameter must be
+        # determined to better than half its value
+        for k in new:
+            if model.kind(k) == "time" and not abs(r.parameters[k].value) >= 2.0 * r.parameters[k].std:
+                ok = False
+    for w in r.warnings:
+        if w.startswith("the likelihood is flat") and any(k in w for k in new):
+            ok = False
+    bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
+                  model.kind(k) in ("time", "rate"))
+    return ok, bound
 
 
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
@@ -165,25 +223,37 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             log.warning("candidate %s could not be fitted: %s", term, exc)
             continue
         assert base.loglik is not None and r.loglik is not None
-        df = len(bigger.param_names) - len(model.param_names)
+        added = len(bigger.param_names) - len(model.param_names)
+        df = added + (1 if term in NUISANCE else 0)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
-        p = float(chi2.sf(lr, df + (1 if term in NUISANCE else 0)))
+        p = float(chi2.sf(lr, df))
         if term in BOUNDARY:
             p *= 0.5
         new = [k for k in bigger.param_names if k not in model.param_names]
+        stochastic = TERMS[term].n_states > 0
+        ident, bound = identification(bigger, r, new) if not stochastic else (True, ())
+        if stochastic:
+            bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
+                          bigger.kind(k) == "rate")
+        note = ""
+        if bound:
+            note = f"{', '.join(bound)} at a search bound: not ranked"
+        elif not ident:
+            note = "its effect is not identified (|estimate| < 2 std): not ranked"
         out.append(Candidate(
-            term=term, lr_stat=lr, df=df, p_value=p, delta_aic=-lr + 2 * df,
-            delta_bic=-lr + df * float(np.log(n)), rms_after=r.residual_rms,
+            term=term, lr_stat=lr, df=df, p_value=p, delta_aic=-lr + 2 * added,
+            delta_bic=-lr + added * float(np.log(n)), rms_after=r.residual_rms,
             loglik_after=float(r.loglik), effect={k: r.parameters[k] for k in new},
-            seconds=time.perf_counter() - t0, result=r,
+            seconds=time.perf_counter() - t0, result=r, identified=ident, at_bound=bound,
+            stochastic=stochastic, note=note,
         ))
-    out.sort(key=lambda c: (c.delta_bic, c.p_value))
+    out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
     return out
 
 
 def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any]]:
     """Significant candidates that explain the data about as well as the best one."""
-    sig = [c for c in cands if c.p_value < alpha_each]
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     if len(sig) < 2:
         return []
     best = min(sig, key=lambda c: c.delta_aic)
@@ -201,22 +271,129 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
     return out
 
 
+def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT) -> ModelError:
+    """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
+    used = prepare(samples, "model error")
+    return model_error(fit.model, fit.values, used, segments(context(used)), unit=unit)
+
+
+def _refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
+                           cands: list[Candidate], alpha_each: float) -> FitResult | None:
+    """The current model refitted from the optimum of each significant candidate whose
+    effect is not identified, with that effect at zero: a better fit of the current model
+    when its likelihood rises (the gain came from the current fit, not from the effect)."""
+    assert fit.loglik is not None
+    best = None
+    for c in cands:
+        if c.identified or c.p_value >= alpha_each or c.result is None:
+            continue
+        start = {k: v for k, v in c.result.values.items() if k in model.param_names}
+        try:
+            r = ml(samples, model, start=start)
+        except GyrostandError:
+            continue
+        assert r.loglik is not None
+        if r.loglik > fit.loglik + REFIT_GAIN and (best is None or r.loglik > (best.loglik or
+                                                                                -np.inf)):
+            best = r
+    return best
+
+
+def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
+                       alpha_each: float) -> list[Candidate]:
+    """Physical explanations before random ones.
+
+    When a deterministic candidate d and a stochastic one s are both significant, both are
+    fitted together: d is proposed first unless it is no longer significant once s is in
+    the model while s still is once d is in (then s is the real one). Either way the table
+    says they compete; the other is tested again after the first is added.
+    """
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    det = [c for c in sig if not c.stochastic]
+    sto = [c for c in sig if c.stochastic]
+    if not det or not sto:
+        return cands
+    d, st = det[0], sto[0]
+    first = d
+    both = model.add(d.term, st.term)
+    try:
+        assert d.result is not None
+        r = ml(samples, both, start=d.result.values, n_local=2)
+    except GyrostandError:
+        r = None
+    if r is not None and r.loglik is not None:
+        df_d = len(both.param_names) - len(model.add(st.term).param_names)
+        df_s = len(both.param_names) - len(model.add(d.term).param_names)
+        lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
+        lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
+        p_d = float(chi2.sf(lr_d, df_d + (1 if d.term in NUISANCE else 0)))
+        p_s = float(chi2.sf(lr_s, df_s + (1 if st.term in NUISANCE else 0)))
+        if st.term in BOUNDARY:
+            p_s *= 0.5
+        log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
+                 d.term, st.term, p_d, st.term, d.term, p_s)
+        if p_d >= alpha_each and p_s < alpha_each:
+            first = st
+    other = st if first is d else d
+    why = "both explain the failure; proposed first" if first is d else \
+        "explains the failure better; proposed first"
+    marked = {d.term: dataclasses.replace(d, competes=st.term),
+              st.term: dataclasses.replace(st, competes=d.term)}
+    marked[first.term] = dataclasses.replace(marked[first.term], note=f"competes with "
+                                             f"{other.term}: {why}")
+    marked[other.term] = dataclasses.replace(
+        marked[other.term], note=f"competes with {first.term}: tested again after it")
+    rest = [marked.get(c.term, c) for c in cands if c.term not in (first.term, other.term)]
+    return [marked[first.term], marked[other.term], *rest]
+
+
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
-             alpha: float = 0.05, terms: list[str] | None = None) -> Report:
-    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates."""
+             alpha: float = 0.05, terms: list[str] | None = None,
+             unit: str = DRIFT_UNIT) -> Report:
+    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
+
+    A significant candidate whose effect is not identified sends the current model back to
+    a refit from that candidate's optimum; if the current fit rises, every candidate is
+    recomputed (at most twice) and a note says so.
+    """
+    if samples.n_observed < MIN_DIAGNOSE_SAMPLES:
+        raise DataError(
+            f"{samples.source}: {samples.n_observed} observed samples are too few to judge "
+            f"a model (diagnose needs at least {MIN_DIAGNOSE_SAMPLES})")
     fit = base if base is not None else ml(samples, model)
-    diag = diagnose_fit(fit, samples)
-    cands = rank_candidates(samples, model, fit, terms)
+    notes: list[str] = []
+    cands: list[Candidate] = []
+    for _ in range(3):
+        cands = rank_candidates(samples, model, fit, terms)
+        m = max(len(cands), 1)
+        alpha_each = alpha / m
+        better = _refit_from_candidates(samples, model, fit, cands, alpha_each)
+        if better is None or len(notes) >= 2:
+            break
+        assert better.loglik is not None and fit.loglik is not None
+        notes.append(f"the current fit was not at its maximum; refitted (ln L "
+                     f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate recomputed")
+        fit = better
     m = max(len(cands), 1)
     alpha_each = alpha / m
+    cands = _order_competitors(samples, model, cands, alpha_each)
+    diag = diagnose_fit(fit, samples)
+    err = fit_error(fit, samples, unit)
     reasons = []
     if not diag.white:
         reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
                        f"over {diag.lags} lags)")
-    sig = [c for c in cands if c.p_value < alpha_each]
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     if sig:
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} "
                        f"(Bonferroni over {m} candidates: p < {alpha_each:.2g})")
+    if not err.at_floor():
+        h = err.headline()
+        reasons.append(
+            f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
+            f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
+            "the model does not predict the drift from the temperature")
     return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
-                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons))
+                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
+                  model_error=err, notes=tuple(notes), unit=unit)

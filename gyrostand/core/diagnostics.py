@@ -196,7 +196,8 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
     theta = np.array([p[k] for k in model.names_of_kind("linear")])
     det = X @ theta if theta.size else np.zeros(len(samples))
     phi, qv, p0, r = model.stochastic(p, samples.dt)
-    sm, _ = kf_smooth(phi, qv, p0, r, np.ascontiguousarray(samples.drift - det))
+    w = samples.noise_weights
+    sm, _ = kf_smooth(phi, qv, p0, r, w, np.ascontiguousarray(samples.drift - det))
     smoothed = samples.drift - det - sm
     fitted = samples.drift - e
     # cross-correlation with every candidate's regressor, prewhitened by the same filter
@@ -208,7 +209,7 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
         if reg is None:
             continue
         Y = np.column_stack([np.where(np.isfinite(samples.drift), reg, np.nan), reg])
-        E, ff, *_ = kf_run(phi, qv, p0, r, Y, True)
+        E, ff, *_ = kf_run(phi, qv, p0, r, w, Y, True)
         xcorr[term] = cross_correlation(z, E[:, 1] / np.sqrt(ff), xcorr_lags)
     segs = []
     for s in segments(ctx):

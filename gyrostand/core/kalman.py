@@ -5,7 +5,9 @@ Two kernels:
 * :func:`kf_innovations` — the exact-likelihood filter of the stochastic part of a model:
   independent scalar Gauss-Markov / random-walk states ``x_i`` with
   ``x_{i,k} = phi_i x_{i,k-1} + w_{i,k}``, ``w ~ N(0, q_i)``, ``x_{i,0} ~ N(0, p0_i)``,
-  observed as ``y_k = sum_i x_{i,k} + v_k``, ``v ~ N(0, r)``. It filters several data
+  observed as ``y_k = sum_i x_{i,k} + v_k``, ``v_k ~ N(0, r·w_k)``. The weight ``w_k``
+  (``rw``) scales the measurement noise of sample k: a bin mean of n_k frames has
+  ``w_k = n̄/n_k`` (an empty ``rw`` means every ``w_k = 1``). It filters several data
   columns at once with the same gains (the gains do not depend on the data), which is how
   the linear parameters are concentrated out of the likelihood by GLS (de Jong 1991).
 * :func:`kf_step` — one predict + update of a general small filter (the LKF).
@@ -35,8 +37,10 @@ def _joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
+def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     """Filter every column of ``Y`` (shape (N, m)) with the same gains.
+
+    ``rw`` (N,) or empty: weight of each sample's measurement noise, R_k = r·rw_k.
 
     Column 0 is the measurement ``y`` and columns 1.. the regressors; a NaN in column 0
     marks a missing sample (predict only). Returns ``(E, f, G, slogf, nobs)``:
@@ -64,14 +68,16 @@ def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
     K = np.empty(n)
     A = np.empty((n, n))
     AH = np.empty(n)
+    weighted = rw.shape[0] == N
     for k in range(N):
         if np.isnan(Y[k, 0]):
             if store:
                 E[k, :] = np.nan
                 f_out[k] = np.nan
         else:
-            # f = H P H' + R, with H = [1, ..., 1]
-            f = r
+            rk = r * rw[k] if weighted else r
+            # f = H P H' + R_k, with H = [1, ..., 1]
+            f = rk
             for i in range(n):
                 s = 0.0
                 for j in range(n):
@@ -111,7 +117,7 @@ def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
                 for j in range(n):
                     s += A[i, j]
                 AH[i] = s
-            _joseph_finish(P, A, AH, K, r)
+            _joseph_finish(P, A, AH, K, rk)
         # predict: x = F x ; P = F P F' + Q  (F, Q diagonal)
         for i in range(n):
             for c in range(m):
@@ -125,10 +131,70 @@ def kf_run(phi, q, p0, r, Y, store):  # pragma: no cover - compiled
     return E, f_out, G, slogf, nobs
 
 
-def kf_innovations(phi, q, p0, r, Y):
+NO_WEIGHTS = np.zeros(0)
+
+
+def kf_innovations(phi, q, p0, r, Y, rw=None):
     """Innovations ``E`` (N, m) of every column of ``Y`` and their variances ``f`` (N,)."""
-    E, f, _, _, _ = kf_run(phi, q, p0, r, np.ascontiguousarray(Y, dtype=float), True)
+    E, f, _, _, _ = kf_run(phi, q, p0, r, NO_WEIGHTS if rw is None else rw,
+                           np.ascontiguousarray(Y, dtype=float), True)
     return E, f
+
+
+@njit(cache=True, nogil=True)
+def kf_filtered_states(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
+    """Filtered states ``x_{k|k}`` (N, n) of the diagonal model of :func:`kf_run`.
+
+    NaN ``y`` = missing (the state is then the prediction ``x_{k|k-1}``). The h-step
+    prediction of the signal from time k is ``sum_i phi_i^h x_{i,k|k}``.
+    """
+    n = phi.shape[0]
+    N = y.shape[0]
+    out = np.empty((N, n))
+    x = np.zeros(n)
+    P = np.zeros((n, n))
+    for i in range(n):
+        P[i, i] = p0[i]
+    weighted = rw.shape[0] == N
+    PH = np.empty(n)
+    K = np.empty(n)
+    A = np.empty((n, n))
+    AH = np.empty(n)
+    for k in range(N):
+        if not np.isnan(y[k]):
+            rk = r * rw[k] if weighted else r
+            f = rk
+            for i in range(n):
+                s = 0.0
+                for j in range(n):
+                    s += P[i, j]
+                PH[i] = s
+                f += s
+            if f > 0.0:
+                hx = 0.0
+                for i in range(n):
+                    hx += x[i]
+                e = y[k] - hx
+                for i in range(n):
+                    K[i] = PH[i] / f
+                    x[i] += K[i] * e
+                for i in range(n):
+                    for j in range(n):
+                        A[i, j] = P[i, j] - K[i] * PH[j]
+                for i in range(n):
+                    s = 0.0
+                    for j in range(n):
+                        s += A[i, j]
+                    AH[i] = s
+                _joseph_finish(P, A, AH, K, rk)
+        for i in range(n):
+            out[k, i] = x[i]
+        for i in range(n):
+            x[i] *= phi[i]
+            for j in range(n):
+                P[i, j] *= phi[i] * phi[j]
+            P[i, i] += q[i]
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -226,7 +292,7 @@ def foh_weights(beta: float, dt: float) -> tuple[float, float, float]:
 
 
 @njit(cache=True, nogil=True)
-def kf_smooth(phi, q, p0, r, y):  # pragma: no cover - compiled
+def kf_smooth(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
     """Fixed-interval (Rauch-Tung-Striebel) smoother of the diagonal model of :func:`kf_run`.
 
     Returns ``(s, v)``: the smoothed signal ``s_k = H x_{k|N}`` (sum of the stochastic
@@ -247,18 +313,20 @@ def kf_smooth(phi, q, p0, r, y):  # pragma: no cover - compiled
     P = np.zeros((n, n))
     for i in range(n):
         P[i, i] = p0[i]
+    weighted = rw.shape[0] == N
     for k in range(N):
         xp[k] = x
         Pp[k] = P
         if not np.isnan(y[k]):
+            rk = r * rw[k] if weighted else r
             PH = P.sum(axis=1)
-            f = PH.sum() + r
+            f = PH.sum() + rk
             K = PH / f
             e = y[k] - x.sum()
             x = x + K * e
             A = P - np.outer(K, PH)
             AH = A.sum(axis=1)
-            P = A - np.outer(AH, K) + r * np.outer(K, K)
+            P = A - np.outer(AH, K) + rk * np.outer(K, K)
             P = 0.5 * (P + P.T)
         xf[k] = x
         Pf[k] = P

@@ -51,6 +51,19 @@ GTOL = 1e-8
 FTOL = 1e-10
 
 
+#: a time constant (warm-up, thermal lag) lies between this many steps Δt ...
+TIME_MIN_STEPS = 3.0
+#: ... and this many record lengths: shorter is one sample's noise, longer is a trend
+TIME_MAX_RECORDS = 1.0
+#: points of the scan over a nonlinear parameter new to a refit (see ml_fit's ``start``)
+SCAN_POINTS = 13
+
+
+def time_bounds(dt: float, duration: float) -> tuple[float, float]:
+    """Search bounds of ln τ for a physical time constant: several Δt .. the record length."""
+    return float(np.log(TIME_MIN_STEPS * dt)), float(np.log(TIME_MAX_RECORDS * duration))
+
+
 class _Problem:
     """The concentrated likelihood of one model on one data set."""
 
@@ -60,6 +73,7 @@ class _Problem:
         if unknown:
             raise ModelError(f"cannot fix {', '.join(unknown)}: not a parameter of {model}")
         self.ctx = context(samples)
+        self.weights = samples.noise_weights
         self.linear = model.names_of_kind("linear")
         self.lin_free = [n for n in self.linear if n not in self.fixed]
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
@@ -86,7 +100,7 @@ class _Problem:
         self.duration = dur
         def rate_bounds(n: str) -> tuple[float, float]:
             if model.kind(n) == "time":
-                return np.log(0.5 * samples.dt), np.log(10.0 * dur)
+                return time_bounds(samples.dt, dur)
             return np.log(1e-3 / dur), np.log(5.0 / samples.dt)
 
         lo = [rate_bounds(n)[0] for n in self.rates] + \
@@ -115,7 +129,7 @@ class _Problem:
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
         Y[:, 1:] = X
-        _, _, G, slogf, n = kf_run(phi, q, p0, r, Y, False)
+        _, _, G, slogf, n = kf_run(phi, q, p0, r, self.weights, Y, False)
         return G, slogf, n
 
     def profile(self, z: np.ndarray):
@@ -298,7 +312,8 @@ def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
 
 def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
        fixed: Mapping[str, float] | None = None, n_local: int | None = None,
-       start: Mapping[str, float] | None = None, std_errors: bool = True) -> FitResult:
+       start: Mapping[str, float] | None = None, std_errors: bool = True,
+       hessian_passes: int = 2) -> FitResult:
     """Exact maximum-likelihood fit of every free parameter of ``model``.
 
     Args:
@@ -308,6 +323,8 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
             or 5 when the model has several rates, whose likelihood has several basins).
         start: extra start point (natural parameter values, e.g. a previous fit).
         std_errors: compute standard errors from the observed information.
+        hessian_passes: numerical Hessians behind them (the second with steps set from
+            the first pass's stds; one pass is enough to judge identification).
     """
     fixed = dict(fixed or {})
     if sigma is not None:
@@ -333,7 +350,19 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
                 z0.append(mid[i])
             else:
                 z0.append(np.log(start[n] / ref))
-        starts.append(np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds]))
+        z0 = np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds])
+        starts.append(z0)
+        # a nonlinear parameter the previous fit lacks (a warm-up's or a lag's time
+        # constant, a second correlation time): scanned over its whole range, Δt to the
+        # record length, with the others at the previous fit, so the local search starts
+        # in the right basin (a coarse grid alone stops at local optima)
+        for i, n in enumerate(prob.znames):
+            if n in start or n not in prob.rates:
+                continue
+            for v in np.linspace(prob.bounds[i][0], prob.bounds[i][1], SCAN_POINTS):
+                z = z0.copy()
+                z[i] = v
+                starts.append(z)
     at_bound: list[str] = []
     lo = np.array([b[0] for b in prob.bounds])
     hi = np.array([b[1] for b in prob.bounds])
@@ -382,7 +411,8 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
                 what = ("≈ 0: no measurable contribution" if side == "lower" and
                         model.kind(name) == "std" else "at the edge of its plausible range")
                 warnings.append(f"ml: {name} is at its {side} search bound ({what})")
-        info = {"iterations": int(best.nit), "converged": converged}
+        info = {"iterations": int(best.nit), "converged": converged,
+                "at_bound": list(at_bound)}
     else:
         z = np.zeros(0)
         info = {"iterations": 0, "converged": True}
@@ -395,7 +425,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     std = dict.fromkeys(free, 0.0)
     if std_errors and free:
         cov, cw = _observed_covariance(model, samples, p, free, gls_info, prob,
-                                       at_bound)
+                                       at_bound, hessian_passes)
         warnings += cw
         std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
     params = {}
@@ -416,7 +446,8 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
 
 
 def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
-                         gls_info: np.ndarray, prob: _Problem, at_bound: list[str]):
+                         gls_info: np.ndarray, prob: _Problem, at_bound: list[str],
+                         passes: int = 2):
     """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
 
     A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
@@ -458,7 +489,7 @@ def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], fr
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
-    for _ in range(2):
+    for _ in range(max(1, passes)):
         H = hessian(ll, x0, h)
         if not np.all(np.isfinite(H)):
             H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)

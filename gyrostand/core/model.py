@@ -142,7 +142,7 @@ class Model:
         Y = np.empty((len(samples), 1 + X.shape[1]))
         Y[:, 0] = samples.drift
         Y[:, 1:] = X
-        return kf_innovations(phi, q, p0, r, Y)
+        return kf_innovations(phi, q, p0, r, Y, samples.noise_weights)
 
     def innovations(self, p: Mapping[str, float], samples: Samples):
         """One-step innovations ``e`` and their variances ``f`` at the parameters ``p``."""

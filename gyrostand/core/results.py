@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -13,6 +14,27 @@ import numpy as np
 from .model import Model
 
 UNIT_TEXT = {"y": "y", "1/s": "1/s", "y/(s*degC)": "y/(s·°C)", "y/sqrt(s)": "y/√s"}
+
+#: the drift's unit when nothing names it (a CSV without ``--unit``)
+DRIFT_UNIT = "y"
+
+
+def unit_text(unit: str, drift: str = DRIFT_UNIT) -> str:
+    """A parameter's unit as printed, the drift's unit in place of ``y``.
+
+    >>> unit_text("y/(s*degC)", "deg/h")
+    '(deg/h)/(s·°C)'
+    >>> unit_text("y*s/degC", "deg/h"), unit_text("y", "deg/h"), unit_text("1/s", "deg/h")
+    ('(deg/h)·s/°C', 'deg/h', '1/s')
+    """
+    d = drift or DRIFT_UNIT
+    if unit == "y":
+        return d
+    if "/" in d or "*" in d or " " in d:
+        d = f"({d})"
+    out = re.sub(r"\by\b", lambda _: d, unit)
+    return (out.replace("sqrt(s)", "√s").replace("degC", "°C").replace("^2", "²")
+            .replace("*", "·"))
 
 
 @dataclass(frozen=True)

@@ -22,28 +22,43 @@ def require_samples(samples: Samples, n_usable: int, n_needed: int, method: str)
 
 
 def find_spikes(y: np.ndarray, threshold: float = SPIKE_THRESHOLD) -> np.ndarray:
-    """Indices of isolated one-sample spikes in ``y`` (NaN = gap).
+    """Indices of isolated spikes of one or two samples in ``y`` (NaN = gap).
 
     Sample k is a spike when y_k − y_{k−1} and y_{k+1} − y_k both exceed ``threshold``
     robust standard deviations (1.4826 · MAD of the first difference), have opposite signs
-    and nearly cancel (the series returns to where it was): a glitch, not a step.
+    and nearly cancel (the series returns to where it was): a glitch, not a step. Two
+    consecutive samples k, k+1 are a burst (a jolt: one swing and its rebound) when each
+    lies more than ``threshold`` robust σ from the mean of y_{k−1} and y_{k+2}, and those
+    two agree to within half the smaller excursion. The neighbours are the nearest
+    *observed* samples, so a spike next to a gap is caught.
     """
+    obs = np.flatnonzero(np.isfinite(y))
+    return obs[_spikes_dense(y[obs], threshold)]
+
+
+def _spikes_dense(y: np.ndarray, threshold: float) -> np.ndarray:
     d = np.diff(y)
-    ok = np.isfinite(d)
-    if np.count_nonzero(ok) < 10:
+    if d.size < 10:
         return np.zeros(0, dtype=int)
-    med = np.median(d[ok])
-    scale = 1.4826 * float(np.median(np.abs(d[ok] - med)))
+    med = np.median(d)
+    scale = 1.4826 * float(np.median(np.abs(d - med)))
     if scale == 0:
-        scale = float(np.mean(np.abs(d[ok] - med)))
+        scale = float(np.mean(np.abs(d - med)))
     if scale == 0:
         return np.zeros(0, dtype=int)
+    lim = threshold * scale
     a, b = d[:-1], d[1:]  # jump into sample k = 1..N-2, and out of it
-    with np.errstate(invalid="ignore"):
-        big = (np.abs(a) > threshold * scale) & (np.abs(b) > threshold * scale)
-        back = (np.sign(a) != np.sign(b)) & (np.abs(a + b) < 0.5 * np.maximum(np.abs(a),
-                                                                              np.abs(b)))
-    return np.flatnonzero(big & back) + 1
+    big = (np.abs(a) > lim) & (np.abs(b) > lim)
+    back = (np.sign(a) != np.sign(b)) & (np.abs(a + b) < 0.5 * np.maximum(np.abs(a),
+                                                                          np.abs(b)))
+    one = np.flatnonzero(big & back) + 1
+    # bursts of two: samples k, k+1 (k = 1..N-3) against y_{k-1} and y_{k+2}
+    ref = 0.5 * (y[:-3] + y[3:])
+    e1 = np.abs(y[1:-2] - ref)
+    e2 = np.abs(y[2:-1] - ref)
+    agree = np.abs(y[3:] - y[:-3]) < 0.5 * np.minimum(e1, e2)
+    k = np.flatnonzero((e1 > lim) & (e2 > lim) & agree) + 1
+    return np.unique(np.concatenate([one, k, k + 1])).astype(int)
 
 
 def prepare(samples: Samples, method: str) -> Samples:
@@ -61,8 +76,13 @@ def prepare(samples: Samples, method: str) -> Samples:
         return samples
     y = y.copy()
     y[spikes] = np.nan
-    at = ", ".join(f"{samples.t[k]:g}" for k in spikes[:5]) + (" ..." if spikes.size > 5 else "")
+    more = " ..." if spikes.size > 5 else ""
+    t0 = float(samples.t[0])
+    at = ", ".join(f"{samples.t[k]:.10g}" for k in spikes[:5]) + more
+    if t0 != 0.0:  # epoch times: say where in the record, too
+        at += " (" + ", ".join(f"{samples.t[k] - t0:.6g}" for k in spikes[:5]) + more + \
+            " s from the first sample)"
     w = (f"{spikes.size} isolated spike(s) > {SPIKE_THRESHOLD:g} robust σ removed from the "
          f"drift (treated as gaps) at t = {at} s")
-    return Samples(t=samples.t, drift=y, temp=samples.temp, dt=samples.dt,
-                   source=samples.source, warnings=(*samples.warnings, w))
+    y.setflags(write=False)
+    return samples.replace(drift=y, warnings=(*samples.warnings, w))

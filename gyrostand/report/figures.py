@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from ..core.candidates import Report
 from ..core.data import Samples
 from ..core.diagnostics import allan_deviation
-from ..core.results import UNIT_TEXT
+from ..core.results import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 
 WIDTH = 10.0  # in; at DPI 100 -> 1000 px
@@ -30,12 +30,10 @@ IDENT_COLOURS = ("#1f78b4", "#33a02c", "#6a3d9a", "#ff7f00")
 SCATTER_MAX = 4000
 
 
-def pretty_unit(unit: str) -> str:
-    """A parameter's unit as printed: ``y/(s*degC^2)`` -> ``y/(s·°C²)``."""
-    if unit in UNIT_TEXT:
-        return UNIT_TEXT[unit]
-    return (unit.replace("sqrt(s)", "√s").replace("degC", "°C").replace("^2", "²")
-            .replace("*", "·"))
+def pretty_unit(unit: str, drift: str = DRIFT_UNIT) -> str:
+    """A parameter's unit as printed, in the drift's unit: ``y/(s*degC^2)`` ->
+    ``(deg/h)/(s·°C²)``."""
+    return unit_text(unit, drift)
 
 
 def time_axis(t: np.ndarray) -> tuple[np.ndarray, str]:
@@ -64,25 +62,44 @@ def _shade_segments(ax: Axes, report: Report, scale: float) -> None:
 
 
 def measured_vs_model(samples: Samples, report: Report, deterministic: np.ndarray) -> Figure:
-    """(a) Measured drift, the one-step prediction and the temperature-driven model part."""
+    """(a) Measured drift and the open-loop model (driven by the temperature alone), the
+    one-step prediction faintly; beneath, the open-loop error's 60-s moving mean with the
+    ±floor band the model's own noise predicts."""
     t = samples.t - samples.t[0]
     tt, xlabel = time_axis(t)
-    fig = Figure(figsize=(WIDTH, 4.6), layout="constrained")
-    ax = fig.add_subplot()
+    unit = report.unit
+    fig = Figure(figsize=(WIDTH, 6.0), layout="constrained")
+    ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
     ax.plot(*envelope(tt, samples.drift), color=DATA, lw=0.6, alpha=0.55, label="measured")
-    ax.plot(*envelope(tt, report.diagnosis.fitted), color=PRED, lw=0.6, alpha=0.8,
-            label="model: one-step prediction ŷ(k|k−1)")
+    ax.plot(*envelope(tt, report.diagnosis.fitted), color=PRED, lw=0.5, alpha=0.35,
+            label="one-step prediction ŷ(k|k−1)")
     ax.plot(tt, deterministic, color=MODEL, lw=2.0,
-            label="model: temperature-driven part (no random drift)")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("drift (y)")
+            label="model driven by the temperature alone (open loop, no noise)")
+    ax.set_ylabel(f"drift ({pretty_unit(unit)})")
     ax.set_xlim(tt[0], tt[-1])
     ax.grid(alpha=0.3)
     tw = _temp_twin(ax, tt, samples.temp)
+    err = samples.drift - deterministic
+    w = max(1, int(round(60.0 / samples.dt)))
+    ax_e.plot(*envelope(tt, moving_mean(err, w)), color=MODEL, lw=1.2,
+              label="open-loop error, 60-s moving mean")
+    me = report.model_error
+    title = f"Measured drift and the model {','.join(report.model.names)}"
+    if me is not None and np.isfinite(me.floor):
+        ax_e.axhspan(-me.floor, me.floor, color=PRED, alpha=0.15, lw=0,
+                     label="± floor (the model's own noise, 60-s means)")
+        h = me.headline()
+        title += (f": model error {h['rms']:.3g} {pretty_unit(unit)} "
+                  f"(floor {h['floor']:.3g}, fit {h['fit_percent'] or 0:.1f} %)")
+    ax_e.axhline(0.0, color="black", lw=0.6)
+    ax_e.set_ylabel(f"measured − model ({pretty_unit(unit)})")
+    ax_e.set_xlabel(xlabel)
+    ax_e.grid(alpha=0.3)
+    ax_e.legend(loc="upper right", fontsize=8, frameon=False)
     h1, l1 = ax.get_legend_handles_labels()
     fig.legend(handles=h1 + tw.get_lines()[:1], labels=l1 + ["temperature (right axis)"],
-               loc="outside lower center", ncols=4, fontsize=8, frameon=False)
-    ax.set_title(f"Measured drift and the model {','.join(report.model.names)}")
+               loc="outside lower center", ncols=2, fontsize=8, frameon=False)
+    ax.set_title(title)
     return fig
 
 
@@ -106,7 +123,7 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
     ax1.plot(tt, moving_mean(d.innovations, window), color=MODEL, lw=1.8,
              label=f"moving mean over {window * samples.dt:g} s")
     ax1.axhline(0, color="k", lw=0.6)
-    ax1.set_ylabel("innovation (y)")
+    ax1.set_ylabel(f"innovation ({report.unit})")
     ax1.set_title(f"Residuals over time (RMS {d.rms:.3g}; shading: heating red, cooling blue)")
     ax1.legend(loc="upper left", fontsize=8, framealpha=0.85)
     sig_v = report.fit.parameters.get("white.sigma")
@@ -119,7 +136,7 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
     ax2.plot(tt, moving_mean(d.smoothed, window), color=MODEL, lw=1.8,
              label=f"moving mean over {window * samples.dt:g} s")
     ax2.axhline(0, color="k", lw=0.6)
-    ax2.set_ylabel("smoothed residual (y)")
+    ax2.set_ylabel(f"smoothed residual ({report.unit})")
     ax2.set_xlabel(xlabel)
     ax2.set_xlim(tt[0], tt[-1])
     ax2.legend(loc="upper left", fontsize=8, framealpha=0.85)
@@ -143,7 +160,7 @@ def residual_vs_inputs(samples: Samples, report: Report, rate: np.ndarray,
     pick = np.sort(rng.choice(n, SCATTER_MAX, replace=False)) if n > SCATTER_MAX else slice(None)
     xs = {"dT/dt (°C/min)": rate * 60.0, "temperature T (°C)": np.asarray(samples.temp)}
     ys = {"standardized innovation": d.standardized,
-          "y − temperature-driven part (y)": samples.drift - deterministic}
+          f"y − temperature-driven part ({report.unit})": samples.drift - deterministic}
     fig = Figure(figsize=(WIDTH, 6.6), layout="constrained")
     axes = fig.subplots(2, 2, sharey="row")
     for i, (ylab, y) in enumerate(ys.items()):
@@ -251,7 +268,7 @@ def convergence(conv: Sequence[Convergence], report: Report) -> Figure:
             pad = 0.08 * (hi - lo) if hi > lo else abs(lo) * 0.1 + 1e-12
             ax.set_ylim(lo - pad, hi + pad)
         unit = report.model.unit(name) if name in report.model.param_names else ""
-        unit = pretty_unit(unit)
+        unit = pretty_unit(unit, report.unit)
         ax.set_title(f"{name}" + (f" ({unit})" if unit else ""), fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=7, framealpha=0.85)
@@ -263,14 +280,17 @@ def convergence(conv: Sequence[Convergence], report: Report) -> Figure:
 
 
 def ledger(points: Sequence[LedgerPoint]) -> Figure:
-    """(f) Residual RMS and log-likelihood per model of the ledger: the error falling."""
-    fig = Figure(figsize=(WIDTH, 4.8), layout="constrained")
-    ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
+    """(f) Model error (open loop, 60-s means) with its floor, residual RMS and
+    log-likelihood per model of the ledger: the error falling."""
+    fig = Figure(figsize=(WIDTH, 6.2), layout="constrained")
+    ax0, ax1, ax2 = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 2])
     x = np.arange(len(points))
     real = np.array([not p.what_if for p in points])
+    err = np.array([p.model_error for p in points])
+    floor = np.array([p.floor for p in points])
     rms = np.array([p.rms for p in points])
     ll = np.array([p.loglik for p in points])
-    for ax, y, col in ((ax1, rms, PRED), (ax2, ll, MODEL)):
+    for ax, y, col in ((ax0, err, MODEL), (ax1, rms, PRED), (ax2, ll, DATA)):
         ax.plot(x[real], y[real], color=col, marker="o", ms=7, lw=2)
         if not real.all():  # the what-if point: dashed from the current model, open marker
             k = int(np.flatnonzero(~real)[0])
@@ -278,14 +298,22 @@ def ledger(points: Sequence[LedgerPoint]) -> Figure:
             ax.plot(x[k], y[k], marker="o", ms=8, mfc="white", mec=col, mew=2)
         ax.grid(alpha=0.3)
         ax.margins(x=0.08, y=0.25)
-    for xi, r in zip(x, rms, strict=True):
-        change = f" ({(r / rms[0] - 1) * 100:+.1f} %)" if xi else ""
-        ax1.annotate(f"{r:.4g}{change}", (xi, r), ha="center", va="bottom", fontsize=8,
+    if np.isfinite(floor).any():
+        ax0.plot(x, floor, color=PRED, ls=":", marker="_", ms=12, lw=1.2,
+                 label="floor (the model's own noise)")
+        ax0.legend(loc="upper right", fontsize=8, frameon=False)
+    base = next((v for v in err if np.isfinite(v)), np.nan)
+    for xi, r in zip(x, err, strict=True):
+        if not np.isfinite(r):
+            continue
+        change = f" ({(r / base - 1) * 100:+.0f} %)" if xi and np.isfinite(base) else ""
+        ax0.annotate(f"{r:.3g}{change}", (xi, r), ha="center", va="bottom", fontsize=8,
                      xytext=(0, 6), textcoords="offset points")
-    ax1.set_ylabel("residual RMS (y)")
-    ax1.set_title("The ledger: one point per model, in the order tried"
+    ax0.set_ylabel("model error\n(open loop, 60-s)")
+    ax0.set_title("The ledger: one point per model, in the order tried"
                   + (" (open: what adding the best candidate would give)"
                      if not real.all() else ""))
+    ax1.set_ylabel("innovation RMS")
     ax2.set_ylabel("log-likelihood")
     ax2.set_xticks(x, [_wrap(p.label) for p in points], fontsize=8)
     return fig
@@ -321,7 +349,7 @@ def allan(report: Report, dt: float) -> Figure:
     ax.plot([], [], color="k", ls=":", lw=1, label="white noise (slope −½)")
     ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("averaging time τ (s)")
-    ax.set_ylabel("σ(τ) (y)")
+    ax.set_ylabel(f"σ(τ) ({report.unit})")
     ax.grid(which="both", alpha=0.3)
     ax.set_title("Allan deviation of the residuals")
     return fig

@@ -74,15 +74,18 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     det = X @ np.array([p[k] for k in lin]) if lin else np.zeros(len(s))
     conv, conv_source = convergence(subject, rep)
     steps = ledger_steps(subject)
-    points = ledger_points(steps, rep)
+    points = ledger_points(steps, rep, s)
 
     plots: list[tuple[Plot, Callable[[], Figure]]] = [
         (Plot("measured_vs_model.png",
-              "Measured drift over time with the model's one-step prediction and its "
-              "temperature-driven part; temperature on the right axis",
-              "Measured drift (grey), the model's one-step prediction (blue) and the part of "
-              "the model driven by temperature alone (orange); temperature in red on the "
-              "right axis."),
+              "Measured drift over time with the model driven by the temperature alone "
+              "(open loop), and the open-loop error beneath with the model's floor",
+              "Top: measured drift (grey), the model driven by the temperature alone with "
+              "every noise at zero (orange: what a thermal compensation built from this "
+              "model would remove) and, faintly, the one-step prediction (blue); "
+              "temperature in red on the right axis. Bottom: the open-loop error's 60-s "
+              "moving mean; the blue band is the floor the model's own noise predicts — "
+              "structure outside it is an effect the model lacks."),
          lambda: figures.measured_vs_model(s, rep, det)),
         (Plot("residuals.png",
               "Innovations and smoothed residuals over time with ±2σ bands and their moving "
@@ -113,9 +116,12 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
               "figures). The truth is unknown; the dashed line is the final ML estimate."),
          lambda: figures.convergence(conv, rep)),
         (Plot("ledger.png",
-              "Residual RMS and log-likelihood for each model of the ledger",
-              "The ledger, one point per model in the order tried: residual RMS (lower is "
-              "better) and log-likelihood (higher is better)."
+              "Model error with its floor, residual RMS and log-likelihood for each model "
+              "of the ledger",
+              "The ledger, one point per model in the order tried: the model error "
+              "(open-loop RMS of 60-s means; the dotted line is the floor the model's own "
+              "noise predicts), the innovation RMS (lower is better) and the "
+              "log-likelihood (higher is better)."
               + (" The open point is what adding the best significant candidate gives."
                  if points and points[-1].what_if else "")),
          lambda: figures.ledger(points)),
@@ -195,8 +201,8 @@ def _num(x: float | None, fmt: str = ".4g") -> str:
     return format(float(x), fmt)
 
 
-def _unit(u: str) -> str:
-    return pretty_unit(u)
+def _unit(u: str, drift: str) -> str:
+    return pretty_unit(u, drift)
 
 
 def _table(head: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1,
@@ -235,7 +241,9 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
         f"{len(s)} samples every {s.dt:g} s over {dur / 3600:.2f} h, "
         f"{len(s) - s.n_observed} gaps; temperature {float(np.min(s.temp)):.2f} to "
         f"{float(np.max(s.temp)):.2f} °C. Model <code>{_e(model)}</code>. "
-        f"Drift unit y (as recorded, e.g. °/h). Written {now} by gyrostand {__version__}.</p>",
+        f"Drift unit {_e(rep.unit)}"
+        + (" (not named: give it with --unit)" if rep.unit == "y" else " (from the DBC or "
+           "--unit)") + f". Written {now} by gyrostand {__version__}.</p>",
     ]
     # verdict
     out.append("<h2>Verdict</h2>")
@@ -250,16 +258,25 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
         best = rep.significant[0]
         out.append(f"<p>Next step: <code>gyrostand fit RUN --add {_e(best.term)}</code> "
                    f"(residual RMS {_num(d.rms)} → {_num(best.rms_after)}).</p>")
+    me = rep.model_error
+    if me is not None:
+        h = me.headline()
+        out.append(
+            f"<p><b>Model error</b> (measured − the model driven by the temperature alone, "
+            f"RMS of {h['window_s']:g}-s means over the run): {_num(h['rms'])} "
+            f"{_e(me.unit)}; the floor the model's own noise leaves: {_num(h['floor'])}; "
+            f"unexplained √(error² − floor²): {_num(h['unexplained'])}; fit "
+            f"{_num(h['fit_percent'], '.1f')} %.</p>")
     out.append(fig["measured_vs_model.png"])
     # parameters and residual statistics
     out.append("<h2>Parameters (maximum likelihood)</h2>")
     rows = [[f"<code>{_e(k)}</code>", _num(e.value, ".6g"),
-             "fixed" if e.fixed else _num(e.std, ".3g"), _e(_unit(e.unit))]
+             "fixed" if e.fixed else _num(e.std, ".3g"), _e(_unit(e.unit, rep.unit))]
             for k, e in fit.parameters.items()]
     out.append(_table(["parameter", "value", "± std", "unit"], rows, left=1))
     out.append(_table(["residual statistic", "value"], [
-        ["innovation RMS (y)", _num(d.rms)],
-        ["smoothed-residual RMS (y)", _num(d.smoothed_rms)],
+        [f"innovation RMS ({_e(rep.unit)})", _num(d.rms)],
+        [f"smoothed-residual RMS ({_e(rep.unit)})", _num(d.smoothed_rms)],
         ["log-likelihood", _num(fit.loglik, ".6g")],
         [f"Ljung–Box Q over {d.lags} lags", _num(d.ljung_box_q)],
         ["Ljung–Box p (white when ≥ 0.01)", _num(d.ljung_box_p, ".3g")],
@@ -290,7 +307,7 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
     rows, classes = [], []
     for i, c in enumerate(rep.candidates, start=1):
         eff = "<br>".join(f"<code>{_e(k)}</code> = {_num(e.value, '.4g')} ± "
-                          f"{_num(e.std, '.2g')} {_e(_unit(e.unit))}"
+                          f"{_num(e.std, '.2g')} {_e(_unit(e.unit, rep.unit))}"
                           for k, e in c.effect.items())
         rows.append([f"{i}. {'★ ' if c.term in sig else ''}<code>{_e(c.term)}</code>",
                      _num(c.lr_stat, ".2f"), str(c.df), _num(c.p_value, ".2g"),
@@ -312,8 +329,8 @@ def render(subject: Subject, rep: Report, plots: Sequence[Plot],
     out.append("<h2>The ledger: model steps</h2>")
     out.append(fig["ledger.png"])
     if steps:
-        out.append(_table(["step", "time (UTC)", "action", "change", "model", "RMS after",
-                           "log-likelihood", "adequate"],
+        out.append(_table(["step", "time (UTC)", "action", "change", "model",
+                           "model error", "RMS after", "log-likelihood", "adequate"],
                           [_ledger_row(st) for st in steps], left=5))
     else:
         out.append(f"<p>The ledger <code>{_e(subject.ledger_path.name)}</code> has no steps "
@@ -334,10 +351,13 @@ def _ledger_row(st: dict[str, Any]) -> list[str]:
         change = " ".join([f"+{t}" for t in st.get("added", [])]
                           + [f"−{t}" for t in st.get("removed", [])])
         rms, ll, adequate = after.get("rms"), after.get("loglik"), "—"
+        err = after.get("model_error")
     else:
         change, rms, ll = "", st.get("rms"), st.get("loglik")
+        err = st.get("model_error")
         ok = st.get("adequate")
         adequate = "yes" if ok is True else "no" if ok is False else "—"
     return [_e(st.get("step", "")), _e(str(st.get("time", "")).replace("+00:00", "")),
             _e(act), _e(change), f"<code>{_e(','.join(st.get('model', [])))}</code>",
-            _num(rms), _num(ll, ".6g"), adequate]
+            _num(err) if isinstance(err, int | float) else "—", _num(rms), _num(ll, ".6g"),
+            adequate]

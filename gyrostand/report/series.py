@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.candidates import Report
+from ..core.candidates import Report, fit_error
 from ..core.data import Samples
 from ..core.lkf import ESTIMATED, held_names, lkf, lkf_layout
 from ..core.ml import ml
@@ -262,6 +262,8 @@ class LedgerPoint:
     loglik: float
     steps: tuple[int, ...]
     what_if: bool = False
+    model_error: float = math.nan
+    floor: float = math.nan
 
 
 def _change(before: Sequence[str], after: Sequence[str]) -> str:
@@ -274,35 +276,55 @@ def ledger_steps(subject: Subject) -> list[dict[str, Any]]:
     return [s for s in read_ledger(subject.ledger_path) if s.get("gyro") == subject.gyro]
 
 
-def ledger_points(steps: list[dict[str, Any]], report: Report) -> list[LedgerPoint]:
+def _num(d: Mapping[str, Any], key: str) -> float:
+    v = d.get(key)
+    return float(v) if isinstance(v, int | float) else math.nan
+
+
+def ledger_points(steps: list[dict[str, Any]], report: Report,
+                  samples: Samples | None = None) -> list[LedgerPoint]:
     """One point per model change (the latest numbers of each model), then the current
-    model if it differs, then — when a candidate is significant — what adding it gives."""
+    model if it differs, then — when a candidate is significant — what adding it gives
+    (its model error too when ``samples`` are given)."""
     pts: list[LedgerPoint] = []
 
-    def push(model: Sequence[str], rms: float, loglik: float, step: int | None) -> None:
+    def push(model: Sequence[str], rms: float, loglik: float, step: int | None,
+             err: float = math.nan, floor: float = math.nan) -> None:
         model = tuple(model)
         nums = (step,) if step is not None else ()
         if pts and pts[-1].model == model:
             last = pts[-1]
-            pts[-1] = LedgerPoint(last.label, model, rms, loglik, last.steps + nums)
+            pts[-1] = LedgerPoint(last.label, model, rms, loglik, last.steps + nums,
+                                  model_error=err if math.isfinite(err) else last.model_error,
+                                  floor=floor if math.isfinite(floor) else last.floor)
             return
         label = ",".join(model) if not pts else _change(pts[-1].model, model)
-        pts.append(LedgerPoint(label, model, rms, loglik, nums))
+        pts.append(LedgerPoint(label, model, rms, loglik, nums, model_error=err, floor=floor))
 
     for s in steps:
         try:
             if s.get("action") == "fit":
                 b, a = s["before"], s["after"]
                 if not pts:
-                    push(b["model"], float(b["rms"]), float(b["loglik"]), None)
-                push(a["model"], float(a["rms"]), float(a["loglik"]), s.get("step"))
+                    push(b["model"], float(b["rms"]), float(b["loglik"]), None,
+                         _num(b, "model_error"), _num(b, "model_error_floor"))
+                push(a["model"], float(a["rms"]), float(a["loglik"]), s.get("step"),
+                     _num(a, "model_error"), _num(a, "model_error_floor"))
             elif s.get("action") == "diagnose":
-                push(s["model"], float(s["rms"]), float(s["loglik"]), s.get("step"))
+                push(s["model"], float(s["rms"]), float(s["loglik"]), s.get("step"),
+                     _num(s, "model_error"), _num(s, "model_error_floor"))
         except (KeyError, TypeError, ValueError):
             log.warning("ledger step %s is incomplete; left out of the plot", s.get("step"))
-    push(report.model.names, report.diagnosis.rms, float(report.fit.loglik or np.nan), None)
+    err = getattr(report, "model_error", None)
+    push(report.model.names, report.diagnosis.rms, float(report.fit.loglik or np.nan), None,
+         err.rms if err is not None else math.nan, err.floor if err is not None else math.nan)
     if not report.adequate and report.significant:
         c = report.significant[0]
+        e_c = f_c = math.nan
+        if samples is not None and c.result is not None:
+            ce = fit_error(c.result, samples, err.unit if err is not None else "y")
+            e_c, f_c = ce.rms, ce.floor
         pts.append(LedgerPoint(f"if +{c.term}", tuple(report.model.names) + (c.term,),
-                               c.rms_after, c.loglik_after, (), what_if=True))
+                               c.rms_after, c.loglik_after, (), what_if=True,
+                               model_error=e_c, floor=f_c))
     return pts

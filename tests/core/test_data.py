@@ -56,7 +56,7 @@ def test_empty_t_is_an_error(tmp_path):
 
 def test_off_grid_time_is_an_error(tmp_path):
     p = write(tmp_path, "t,drift,temp\n0,1,20\n1,1,20\n2.5,1,20\n")
-    with pytest.raises(DataError, match="line 4: t = 2.5 s is not on the 1-s grid"):
+    with pytest.raises(DataError, match="line 4: t = 2.5 s is not on the 1-s grid .*--dt"):
         Samples.read_csv(p)
 
 
@@ -129,3 +129,75 @@ def test_gaps_never_produce_nan_estimates(method):
         assert np.isfinite(e.value) and np.isfinite(e.std)
     assert np.isnan(r.residuals[300:420]).all()
     assert abs(r.value("temp.gamma") / -0.01 - 1) < 0.5
+
+
+# ---- CSV input as people write it -------------------------------------------------------
+
+def test_a_utf8_bom_csv_reads(tmp_path):
+    p = tmp_path / "bom.csv"
+    p.write_bytes("\ufefft,drift,temp\n0,1,20\n1,1.1,20.1\n".encode())
+    s = Samples.read_csv(p)
+    assert len(s) == 2 and s.drift[1] == 1.1
+
+
+@pytest.mark.parametrize("data, what", [
+    ("t,drift,temp\n0,1,20\n".encode("utf-16"), "UTF-16 text"),
+    (b"t,drift,temp\n0,1,20\n1,\xe9,20\n", "line 3: not UTF-8 text"),
+    (b"t,drift,temp\n0,1,20\x00\n", "line 2: a NUL character"),
+])
+def test_non_utf8_csvs_give_a_clean_error(tmp_path, data, what):
+    p = tmp_path / "bad.csv"
+    p.write_bytes(data)
+    with pytest.raises(DataError, match=f"bad.csv: {what}"):
+        Samples.read_csv(p)
+
+
+def test_missing_rows_are_gaps_at_the_most_common_step(tmp_path):
+    rows = [0, 2, 4, 6, 10, 12, 14, 20, 22]  # 2-s record with missing rows
+    p = write(tmp_path, "t,drift,temp\n" + "".join(f"{t},{t * 0.1},{20 + t}\n" for t in rows))
+    s = Samples.read_csv(p)
+    assert s.dt == 2.0 and len(s) == 12
+    assert np.isnan(s.drift[[4, 8, 9]]).all() and s.n_observed == 9
+    assert Samples.read_csv(p, dt=1.0).dt == 1.0
+
+
+def test_epoch_times_with_one_early_row_keep_their_step(tmp_path):
+    t0 = 1_700_000_000.0
+    t = t0 + np.arange(50.0)
+    t[20] -= 0.1  # one row 0.1 s early
+    p = write(tmp_path, "t,drift,temp\n" + "".join(f"{float(x)!r},{i * 0.01},20\n" for i, x in
+                                                    enumerate(t)))
+    s = Samples.read_csv(p)
+    assert s.dt == 1.0 and len(s) == 50 and s.n_observed == 50
+    assert any("1 rows off the 1-s grid (up to 0.1 s, first at" in w and "line 22" in w
+               for w in s.warnings), s.warnings
+
+
+def test_an_irregular_cadence_snaps_to_its_own_step(tmp_path):
+    rng = np.random.default_rng(0)
+    t = 1_440_000_000 + np.concatenate([[0], np.cumsum(rng.choice([9, 10, 11], 300))])
+    t = t[np.abs(t - t[0] - 10 * np.rint((t - t[0]) / 10)) <= 2]  # what the record keeps
+    p = write(tmp_path, "t,drift,temp\n" + "".join(f"{x},0.1,20\n" for x in t))
+    s = Samples.read_csv(p)
+    assert s.dt == 10.0 and s.n_observed + sum(
+        int(w.split()[0]) for w in s.warnings if "shared a bin" in w) == t.size
+
+
+@pytest.mark.parametrize("jump", [1e9, 1e7])
+def test_a_timestamp_typo_is_an_error_naming_the_line(tmp_path, jump):
+    t = list(range(100)) + [99 + jump]
+    p = write(tmp_path, "t,drift,temp\n" + "".join(f"{x:.0f},0.1,20\n" for x in t))
+    with pytest.raises(DataError, match=r"line 102: time jumps by .* a timestamp typo\?"):
+        Samples.read_csv(p)
+
+
+def test_spikes_are_caught_next_to_gaps_and_as_two_sample_jolts():
+    from gyrostand.core.validate import find_spikes
+
+    rng = np.random.default_rng(1)
+    y = rng.standard_normal(400)
+    y[[99, 101]] = np.nan
+    y[100] = 80.0  # a spike with gaps on both sides
+    y[250], y[251] = -60.0, 55.0  # a jolt: a swing and its rebound
+    y[300:] += 70.0  # a step is no spike
+    assert list(find_spikes(y)) == [100, 250, 251]

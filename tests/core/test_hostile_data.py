@@ -100,9 +100,10 @@ def test_lkf_recovers_after_the_gap():
     assert spd(gap.covariance)
 
 
-@pytest.mark.parametrize("n", [12, 40])
+@pytest.mark.parametrize("n", [30, 40])
 def test_diagnose_a_short_record(n):
-    """Fewer samples than the 60 cross-correlation lags: fewer lags, no crash."""
+    """Fewer samples than the 60 cross-correlation lags: fewer lags, no crash (below 30
+    samples diagnose refuses to judge: tests/workbench/test_verdicts.py)."""
     from gyrostand.core.candidates import diagnose
 
     s = simulate(M, P, paper_profile(), duration=n - 1, seed=1)

@@ -54,6 +54,7 @@ def test_temp_rate_hidden_in_can_frames(tmp_path):
 
     subject = open_subject(run_dir)
     assert subject.model.names == ("markov", "temp", "white", "bias")
+    assert subject.unit == "deg/h"  # the drift signal's unit in the DBC, through the config
     assert len(subject.samples) == 14400 or len(subject.samples) == 14401
     rep = run_diagnose(subject)
     assert not rep.adequate
