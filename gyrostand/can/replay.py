@@ -60,12 +60,15 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     to ``ingest.listener`` and ``listeners``; yield the bins that close, batch by batch,
     and at the end the flushed last bins.
 
-    ``pump_every`` frames between pumps; the listener's FIFO must hold that many frames'
-    samples (the default fits the default capacity). ``parallel``: parse log files in a
+    ``pump_every`` frames between pumps, at most what the listener's FIFO always holds
+    (:meth:`~gyrostand.can.decode.DecodingListener.frames_that_fit`): a replay never
+    overflows it, whatever ``sampling.buffer`` is. ``parallel``: parse log files in a
     reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
     process may use two CPUs or more; never with ``realtime`` or extra ``listeners``,
     which take :class:`can.Message` objects).
     """
+    # back-pressure: pump before the listener's FIFO can overflow (a replay never drops)
+    pump_every = max(1, min(int(pump_every), ingest.listener.frames_that_fit()))
     paths: list[Path] | None = None
     if isinstance(messages, (str, Path)):
         paths = [Path(messages)]
