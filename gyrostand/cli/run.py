@@ -18,7 +18,8 @@ def add_parser(sub: Any) -> None:
         description="Listen on the session's bus, record every frame, bin, identify online, "
                     "answer with result/status frames; on SIGINT/SIGTERM, --duration or a "
                     "stop command write the final fit and report. Prints 'ready: RUN_DIR' "
-                    "once listening.")
+                    "once listening ('waiting: ...' first while the bus cannot be opened "
+                    "yet, with reconnect.at_start).")
     p.add_argument("config", help="YAML session file")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S s of frame time from the first frame (or S+5 s of "
@@ -42,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
     def ready(run_dir) -> None:
         print(f"ready: {run_dir}", flush=True)
 
+    def waiting(text: str) -> None:
+        print(f"waiting: {text}", flush=True)
+
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
-                       on_ready=ready, resume=args.resume)
+                       on_ready=ready, resume=args.resume, on_waiting=waiting)
     print_outcome(outcome, sys.stdout)
     return 0 if outcome.ok else 1

@@ -161,12 +161,15 @@ def _permanent(exc: CanEdgeError) -> bool:
 
 
 def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
-                      handle_signals: bool = True) -> can.BusABC:
+                      handle_signals: bool = True,
+                      on_waiting: Callable[[str], None] | None = None) -> can.BusABC:
     """Open ``cfg.bus``; while it cannot be opened, retry with backoff
     (``reconnect.first_delay`` doubling up to ``max_delay``) for ``reconnect.at_start`` s.
     Raises :class:`CanEdgeError` (the last failure, with the time waited) when the time is
     up, at once for a bus that can never open, or when ``stop`` is set / SIGINT or
-    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting."""
+    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting.
+    ``on_waiting(text)`` is called once when the waiting begins (the CLI prints it: a
+    signal for whoever starts the bus after the daemon)."""
     rc = cfg.reconnect
     t0 = time.monotonic()
     delay, attempts = rc.first_delay, 0
@@ -189,6 +192,9 @@ def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
                 if attempts == 1:
                     log.warning("%s; waiting for the bus, up to %g s (reconnect.at_start)",
                                 exc, rc.at_start)
+                    if on_waiting is not None:
+                        on_waiting(f"for the bus, up to {rc.at_start:g} s "
+                                   f"(reconnect.at_start)")
                     if handle_signals and threading.current_thread() is threading.main_thread():
                         for sig in (signal.SIGINT, signal.SIGTERM):
                             old[sig] = signal.signal(sig, lambda *_: stop.set())
@@ -211,13 +217,15 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
              on_ready: Callable[[Path], None] | None = None,
              stop_event: threading.Event | None = None, handle_signals: bool = True,
              poll: float = 0.002, truths: dict[str, dict[str, float]] | None = None,
-             resume: str | Path | bool | None = None) -> RunOutcome:
+             resume: str | Path | bool | None = None,
+             on_waiting: Callable[[str], None] | None = None) -> RunOutcome:
     """Run the daemon on ``cfg.bus`` until stopped; return the outcome (paths, fits).
 
     ``on_ready(run_dir)`` is called once the Notifier listens (frames sent before that are
     lost on most buses). ``truths`` (gyro → parameter values) only label the report.
     ``resume``: continue a run folder instead of starting one (a path, or ``True`` / ``""``
-    for the session's newest run folder under ``out``).
+    for the session's newest run folder under ``out``). ``on_waiting(text)``: called when
+    the daemon begins to wait for a bus that cannot be opened yet.
     """
     state = None
     lock: RunLock | None = None
@@ -231,7 +239,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             raise
         raw_path = state.segment
     try:
-        bus = open_bus_at_start(cfg, stop_event, handle_signals)
+        bus = open_bus_at_start(cfg, stop_event, handle_signals, on_waiting)
     except BaseException:
         if lock is not None:
             lock.release()
