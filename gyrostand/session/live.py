@@ -58,6 +58,7 @@ from .outputs import (
     SegmentLog,
     check_writable,
     make_run_dir,
+    next_raw_segment,
     read_segments,
 )
 from .pipeline import BusSink, Pipeline, RunOutcome
@@ -262,7 +263,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     sink = BusSink(None)
     link: BusLink | None = None
     try:
-        recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync)
+        recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync,
+                            next_path=lambda: next_raw_segment(run_dir))
 
         def commit_raw() -> None:  # before any bin reaches samples.csv
             recorder.sync() if cfg.fsync else recorder.flush()
@@ -302,6 +304,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             "recorder": {"file": raw_path.name, "frames": recorder.frames,
                          "flushes": recorder.flushes, "errors": recorder.errors,
                          "unrecordable": recorder.unrecordable,
+                         "files": [p.name for p in recorder.files],
+                         "unfaithful": recorder.unfaithful,
                          "failed": str(recorder.failed) if recorder.failed else None},
             "bus": {"channel": link.channel,
                     "watch_errors": link.watch_errors + link.watch.errors,
