@@ -10,6 +10,8 @@ from typing import Any
 from ..core.data import Samples
 from ..core.identify import IDENTIFIERS, identify
 from ..core.model import Model
+from ..errors import ConfigError
+from .common import number
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -25,15 +27,16 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--model", default=DEFAULT_MODEL,
                    help=f"comma-separated model terms (default {DEFAULT_MODEL}); "
                         "'white' measurement noise is always included")
-    p.add_argument("--sigma", type=float, default=None,
-                   help="known stationary drift std σ (markov.sigma), as in the paper")
+    p.add_argument("--sigma", type=number(positive=True), default=None,
+                   help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     g = p.add_argument_group("lsq options")
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
                    help="lsq regressor Y_{k-1} (standard, default) or Y_k (the paper's text)")
     g = p.add_argument_group("lkf options")
-    g.add_argument("--beta0", type=float, default=None, help="linearisation point β₀ (1/s)")
-    g.add_argument("--gamma0", type=float, default=None, help="linearisation point γ₀")
+    g.add_argument("--beta0", type=number(positive=True), default=None,
+                   help="linearisation point β₀ (1/s, 0 < β₀ < 1/dt)")
+    g.add_argument("--gamma0", type=number(), default=None, help="linearisation point γ₀")
     g.add_argument("--iterate", action="store_true",
                    help="re-linearise at the previous estimate until it settles")
     p.set_defaults(func=run)
@@ -55,6 +58,9 @@ def options_for(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
+    if args.method == "lkf" and args.beta0 is not None and args.beta0 * samples.dt >= 1.0:
+        raise ConfigError(f"--beta0 {args.beta0:g} 1/s must be below 1/dt = "
+                          f"{1.0 / samples.dt:g} of {args.samples}")
     result = identify(samples, model, args.method, **options_for(args))
     if args.json:
         json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)

@@ -9,7 +9,7 @@ from typing import Any
 
 from ..config import load_config
 from ..session.live import run_live
-from .common import print_outcome
+from .common import number, print_outcome
 
 
 def add_parser(sub: Any) -> None:
@@ -21,7 +21,7 @@ def add_parser(sub: Any) -> None:
                     "once listening ('waiting: ...' first while the bus cannot be opened "
                     "yet, with reconnect.at_start).")
     p.add_argument("config", help="YAML session file")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=number(positive=True), default=None, metavar="S",
                    help="stop after S s of frame time from the first frame (or S+5 s of "
                         "wall time when frames stop flowing)")
     p.add_argument("--out", default=None, metavar="DIR",

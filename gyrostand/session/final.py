@@ -115,7 +115,7 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
                 opts = {"beta0": pt.beta0, "gamma0": pt.gamma0, "b0": pt.b0,
                         "held": dict(pt.held), "iterate": gyro.lkf.iterate}
             out.fits[method] = identify(samples, model, method, **opts)
-        except (GyrostandError, ValueError, np.linalg.LinAlgError) as exc:
+        except (GyrostandError, ValueError, KeyError, np.linalg.LinAlgError) as exc:
             log.warning("gyro %s: final %s fit failed: %s", gyro.name, method, exc)
             out.fits[method] = str(exc)
     return out
