@@ -14,8 +14,8 @@ dying), the daemon logs the outage, closes the bus, and reopens it with exponent
 (``reconnect.first_delay`` doubling up to ``reconnect.max_delay`` s) for up to
 ``reconnect.max_time`` s, meanwhile binning what it has and keeping the files flushed.
 When the bus is back it continues in the same run: frames of the outage are missing, so
-its bins are gaps (n = 0; an outage longer than ``sampling.max_gap`` shows as a jump of
-``t``), never invented. The outage count is in the heartbeat (page 2, ``Outages``), in
+its bins are gaps (n = 0; after an outage longer than ``sampling.max_gap`` the frames are
+timed as after a clock step, as a replay of the raw log times them), never invented. The outage count is in the heartbeat (page 2, ``Outages``), in
 ``run.log`` and in ``result.json`` (``stats.bus``). Without a bus after ``max_time`` s the
 run ends in state ``fault``.
 
