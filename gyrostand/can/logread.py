@@ -279,11 +279,16 @@ def _read_text(path: Path, damage: LogDamage) -> Iterator[can.Message]:
         lines.close()
         raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
     try:
+        at = -1
         while True:
             try:
                 yield from reader
                 return
             except Exception as exc:
+                if lines.n == at:  # nothing more was read: not a line's fault
+                    raise CanEdgeError(f"{path}: corrupt CAN log after line {at}: "
+                                       f"{type(exc).__name__}: {exc}") from exc
+                at = lines.n
                 damage.lines += 1
                 damage.warn(f"{path}: line {lines.n}: cannot parse, skipped "
                             f"({type(exc).__name__}: {exc})")
