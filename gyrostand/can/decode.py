@@ -282,7 +282,7 @@ class DecodingListener(can.Listener):
         once; anything else goes through :meth:`_timed`, which holds or rejects it."""
         n, rej, routes, buf = self._n, self._rej, self._routes, self._buf
         cap = self.capacity
-        window, offset = self.window, self._offset
+        window, offset, a, held = self.window, self._offset, self._anchor, bool(self._held)
         it = iter(frames)
         while True:
             try:
@@ -329,12 +329,11 @@ class DecodingListener(can.Listener):
                         if not lo <= v <= hi:  # also false for NaN and +-inf
                             rej[_OUT_OF_RANGE] += 1
                             continue
-                        a = self._anchor
                         if (a - window <= t <= a + window and t >= route.last_t
-                                and not self._held and len(buf) < cap):
+                                and not held and len(buf) < cap):
                             route.last_t = t
                             if t > a:
-                                self._anchor = t
+                                a = t
                             if cname is not None:
                                 cv = values.get(cname)
                                 if cv is not None:
@@ -367,12 +366,17 @@ class DecodingListener(can.Listener):
                         if not out:
                             n[2] += 1
                             continue
-                    self._timed((t, route, out, counted))
-                    offset = self._offset
+                    self._anchor = a
+                    try:
+                        self._timed((t, route, out, counted))
+                    finally:  # the state _timed left, even if it failed
+                        offset, a, held = self._offset, self._anchor, bool(self._held)
                 break  # every frame received
             except Exception as exc:  # one bad frame: count it, go on with the next
                 self._listener_errors += 1
                 log.exception("listener failed on a frame: %s", exc)
+            finally:
+                self._anchor = a
 
     # -- timing of data frames -----------------------------------------------------------
     def _timed(self, frame: _Held) -> None:
