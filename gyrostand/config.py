@@ -78,6 +78,13 @@ ACK_SIGNALS = ("Command", "Sequence", "Result", "Reason")
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
 MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 1000.0
+#: bounds of sampling.dt (s): frames at up to 1000 Hz in bins of at least 10 ms, at most 1 h
+MIN_DT, MAX_DT = 0.01, 3600.0
+#: sampling.max_gap / dt at most: the gap bins one forward jump may emit
+MAX_GAP_BINS = 1_000_000
+#: |sampling.epoch| and simulate.start at most (s; ~ year 5138): beyond, doubles of frame
+#: time are coarser than 1e-5 s
+MAX_EPOCH = 1e11
 
 
 @dataclass(frozen=True)
@@ -247,14 +254,58 @@ def load_config(path: str | Path) -> SessionConfig:
     """Read and validate a YAML session file. Raises :class:`ConfigError`."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
+    text = decode_text(raw, path)
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}") from exc
+        raise ConfigError(f"{path}: invalid YAML: {_clip(str(exc), 600)}") from exc
     return parse_config(data, source=path, base_dir=path.resolve().parent)
+
+
+def decode_text(raw: bytes, path: str | Path) -> str:
+    """A session file's bytes as text: UTF-8 (a leading BOM is dropped). UTF-16/32 and
+    other encodings are refused with the byte offset. Raises :class:`ConfigError`."""
+    for bom, name in ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+                      (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16")):
+        if raw.startswith(bom):
+            raise ConfigError(f"{path}: the file is {name} text; save it as UTF-8")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}: "
+                          f"{raw[exc.start:exc.start + 4]!r}); save it as UTF-8") from None
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses aliases (``*name``: a few lines of them expand to
+    gigabytes, the "billion laughs") and duplicate keys (YAML's last-one-wins would
+    silently drop the first)."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            ev = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f"aliases (*{_clip(str(ev.anchor), 40)}) are not accepted in a "
+                "session file: write the value out", ev.start_mark)
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+                seen.add(key)
+            except TypeError:  # an unhashable key: SafeLoader says so below
+                continue
+            if dup:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark,
+                    f"duplicate key {_clip(repr(key), 60)}", key_node.start_mark)
+        return super().construct_mapping(node, deep)
 
 
 def parse_config(data: Any, source: str | Path = "<config>",
@@ -269,10 +320,11 @@ class _Parser:
         self.base = base_dir
         self.db: Any = None
         self.dbc_name = "DBC"
+        self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
 
     # -- helpers ---------------------------------------------------------------------
     def fail(self, path: str, msg: str) -> ConfigError:
-        return ConfigError(f"{self.source}: {path}: {msg}")
+        return ConfigError(f"{self.source}: {_clip(path, 200)}: {_clip(msg, 600)}")
 
     def mapping(self, value: Any, path: str, required: tuple[str, ...],
                 optional: tuple[str, ...]) -> dict[str, Any]:
@@ -292,7 +344,10 @@ class _Parser:
                hi: float | None = None, lo_open: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(path, f"expected a number, got {_kind(value)}")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:
+            raise self.fail(path, f"too large ({len(str(abs(value)))}-digit integer)") from None
         if not math.isfinite(x):
             raise self.fail(path, f"must be finite, got {value!r}")
         if lo is not None and (x < lo or (lo_open and x == lo)):
@@ -385,6 +440,7 @@ class _Parser:
             seen[g.name] = i
         self.check_channel_clashes(gyros)
         responses = self.responses(top.get("responses", {}))
+        self.check_own_messages(gyros, responses)
         simulate = None
         if top.get("simulate") is not None:
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
@@ -408,12 +464,15 @@ class _Parser:
 
     def sampling(self, value: Any) -> SamplingConfig:
         m = self.mapping(value, "sampling", (), ("dt", "epoch", "buffer", "max_gap"))
-        dt = self.number(m.get("dt", 1.0), "sampling.dt", lo=0.0, lo_open=True)
+        dt = self.number(m.get("dt", 1.0), "sampling.dt", lo=MIN_DT, hi=MAX_DT)
         epoch = m.get("epoch")
         if epoch is not None:
-            epoch = self.number(epoch, "sampling.epoch")
+            # far from 0 a double cannot tell frame times a bin apart (1e20 s: 16 384 s)
+            epoch = self.number(epoch, "sampling.epoch", lo=-MAX_EPOCH, hi=MAX_EPOCH)
         buffer = self.integer(m.get("buffer", 65536), "sampling.buffer", 16, 100_000_000)
-        max_gap = self.number(m.get("max_gap", 3600.0), "sampling.max_gap", lo=dt)
+        max_gap = self.number(m.get("max_gap", 3600.0), "sampling.max_gap", lo=dt,
+                              hi=MAX_GAP_BINS * dt)
+        self.dt = dt
         return SamplingConfig(dt, epoch, buffer, max_gap)
 
     def channel(self, value: Any, path: str) -> ChannelConfig:
@@ -443,8 +502,21 @@ class _Parser:
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
         model = self.names(m["model"], f"{path}.model", MODEL_TERMS)
+        self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
                             IDENTIFIERS)
+        if "markov" not in model:
+            # lkf linearises the markov state's dynamics and lsq regresses on it: without
+            # it only ml (which takes every term) can identify the model
+            need = [i for i in idents if i in ("lkf", "lsq")]
+            if need and "identifiers" in m:
+                raise self.fail(f"{path}.identifiers", f"{', '.join(need)} need(s) 'markov' "
+                                f"in the model ({', '.join(model)}); use identifiers: [ml]")
+            if need:
+                log.warning("%s: %s: the model (%s) has no markov term: lkf and lsq need "
+                            "it, so only ml identifies this gyro (at the end of the run)",
+                            self.source, path, ", ".join(model))
+                idents = tuple(i for i in idents if i not in ("lkf", "lsq"))
         result = None
         if m.get("result") is not None:
             r = self.mapping(m["result"], f"{path}.result", ("message",), ("summary",))
@@ -468,17 +540,27 @@ class _Parser:
             if v is None or v == "auto":
                 vals[k] = None
                 continue
-            lo, lo_open = {"beta0": (0.0, True), "sigma": (0.0, False),
+            lo, lo_open = {"beta0": (0.0, True), "sigma": (0.0, True),
                            "white_sigma": (0.0, False)}.get(k, (None, False))
             vals[k] = self.number(v, f"{path}.{k}", lo=lo, lo_open=lo_open)
-        held_raw = self.mapping(m.get("held") or {}, f"{path}.held", (),
-                                tuple((m.get("held") or {}).keys()))
+        beta0 = vals.get("beta0")
+        if beta0 is not None and beta0 * self.dt >= 1.0:
+            raise self.fail(f"{path}.beta0", f"{beta0:g} 1/s must be below 1/sampling.dt = "
+                            f"{1.0 / self.dt:g} (a correlation time shorter than one bin "
+                            "cannot be identified from the bins)")
+        held_in = m.get("held")
+        held_raw = self.mapping({} if held_in is None else held_in, f"{path}.held", (),
+                                tuple(held_in) if isinstance(held_in, Mapping) else ())
+        names = self.model_of(model, path).param_names
         held: dict[str, float] = {}
         for k, v in held_raw.items():
             mt = _PARAM_RE.match(str(k))
             if not mt or mt.group(1) not in model:
                 raise self.fail(f"{path}.held.{k}", "expected '<term>.<param>' of a term in "
                                                     "this gyro's model")
+            if str(k) not in names:
+                raise self.fail(f"{path}.held.{k}", f"not a parameter of this gyro's model "
+                                f"(its parameters: {', '.join(names)})")
             held[str(k)] = self.number(v, f"{path}.held.{k}", lo=0.0)
         warmup = self.integer(m.get("warmup", 300), f"{path}.warmup", 10, 10_000_000)
         iterate = bool(self.boolean(m.get("iterate", False), f"{path}.iterate"))
@@ -492,6 +574,38 @@ class _Parser:
         soaked = bool(self.boolean(m.get("soaked", True), f"{path}.soaked"))
         return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate,
                          variant=variant, relinearize_every=every, soaked=soaked, **vals)
+
+    def check_own_messages(self, gyros: tuple[GyroConfig, ...],
+                           responses: ResponsesConfig) -> None:
+        """A measured channel on a message the daemon itself sends or obeys (status, ack,
+        command, a result or summary) would feed it its own frames, or data as commands."""
+        own: dict[int, str] = {}
+        for key in ("status", "ack", "command"):
+            ref = getattr(responses, key)
+            if ref is not None:
+                own[ref.key] = f"responses.{key}"
+        for i, g in enumerate(gyros):
+            if g.result is not None:
+                own[g.result.values.key] = f"gyros[{i}].result.message"
+                if g.result.summary is not None:
+                    own[g.result.summary.key] = f"gyros[{i}].result.summary"
+        for i, g in enumerate(gyros):
+            for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
+                where = own.get(c.signal.message.key)
+                if where is not None:
+                    raise self.fail(f"gyros[{i}].{ch}.message", f"{c.signal.message.name} is "
+                                    f"the daemon's own message ({where})")
+
+    def model_of(self, model: tuple[str, ...], path: str) -> Any:
+        """The core :class:`~gyrostand.core.model.Model` of ``model`` (a ConfigError at
+        ``path`` when the terms do not make one, so no run folder is started for it)."""
+        from gyrostand.core.model import Model
+        from gyrostand.errors import ModelError
+
+        try:
+            return Model.parse(list(model))
+        except ModelError as exc:
+            raise self.fail(path, str(exc)) from None
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         owner: dict[tuple[int, str], str] = {}
@@ -566,7 +680,11 @@ class _Parser:
             q = f"{p}.gyros.{gname}"
             s = self.mapping(spec, q, ("model", "params"), ())
             model = self.names(s["model"], f"{q}.model", MODEL_TERMS)
-            params = self.mapping(s["params"], f"{q}.params", (), tuple(s["params"] or ()))
+            kinds = {f"{t.name}.{prm.name}": prm.kind
+                     for t in self.model_of(model, f"{q}.model").terms for prm in t.params}
+            params = self.mapping(s["params"], f"{q}.params", (),
+                                  tuple(s["params"]) if isinstance(s["params"], Mapping)
+                                  else ())
             vals: dict[str, float] = {}
             for k, v in params.items():
                 mt = _PARAM_RE.match(str(k))
@@ -576,12 +694,24 @@ class _Parser:
                 if mt.group(1) not in model:
                     raise self.fail(f"{q}.params.{k}", f"term {mt.group(1)!r} is not in "
                                     f"{q}.model")
-                vals[str(k)] = self.number(v, f"{q}.params.{k}")
+                kind = kinds.get(str(k))
+                if kind is None:
+                    raise self.fail(f"{q}.params.{k}", f"not a parameter of {q}.model (its "
+                                    f"parameters: {', '.join(kinds)})")
+                if kind in ("rate", "time"):  # positive, and resolvable on the bins
+                    vals[str(k)] = self.number(v, f"{q}.params.{k}", lo=0.0, lo_open=True)
+                    if kind == "rate" and vals[str(k)] * self.dt >= 1.0:
+                        raise self.fail(f"{q}.params.{k}", f"{vals[str(k)]:g} 1/s must be "
+                                        f"below 1/sampling.dt = {1.0 / self.dt:g}")
+                else:
+                    vals[str(k)] = self.number(v, f"{q}.params.{k}",
+                                               lo=0.0 if kind == "std" else None)
             truths[gname] = SimGyroConfig(model, MappingProxyType(vals))
         return SimulateConfig(
             temperature=tuple(bps), gyros=MappingProxyType(truths),
             seed=self.integer(m.get("seed", 0), f"{p}.seed", 0, 2**63 - 1),
-            start=self.number(m.get("start", 1_700_000_000.0), f"{p}.start", lo=0.0),
+            start=self.number(m.get("start", 1_700_000_000.0), f"{p}.start", lo=0.0,
+                              hi=MAX_EPOCH),
             duration=duration, drift_rate=r_drift, temperature_rate=r_temp,
             interpolation=interp, jitter=jitter,
             drop=self.number(m.get("drop", 0.0), f"{p}.drop", lo=0.0, hi=0.99),
@@ -600,5 +730,10 @@ def _join(path: str, key: str) -> str:
 def _kind(value: Any) -> str:
     if value is None:
         return "nothing"
-    return f"{type(value).__name__} {value!r}" if not isinstance(value, (dict, list)) \
-        else type(value).__name__
+    return f"{type(value).__name__} {_clip(repr(value), 80)}" if not isinstance(
+        value, (dict, list)) else type(value).__name__
+
+
+def _clip(text: str, n: int) -> str:
+    """``text`` cut to ``n`` characters (an error message quotes input, never all of it)."""
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"

@@ -59,18 +59,26 @@ def read_ledger(path: Path) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     out = []
-    text = path.read_text()
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     lines = text.split("\n")
     for i, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError as exc:
+            entry = json.loads(line)
+        except (json.JSONDecodeError, RecursionError) as exc:
             if i == len(lines):  # no line end: a step torn while being appended
                 log.warning("%s: line %d: torn last entry left out", path, i)
                 break
-            raise DataError(f"{path}: line {i}: not a JSON ledger entry ({exc.msg})") from None
+            why = exc.msg if isinstance(exc, json.JSONDecodeError) else "nested too deep"
+            raise DataError(f"{path}: line {i}: not a JSON ledger entry ({why})") from None
+        if not isinstance(entry, dict) or not isinstance(entry.get("model", []), (list, str)):
+            raise DataError(f"{path}: line {i}: a ledger entry is a JSON object (with "
+                            f"'model' a list of terms), got {type(entry).__name__}")
+        out.append(entry)
     return out
 
 

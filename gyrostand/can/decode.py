@@ -35,7 +35,7 @@ except ImportError:  # another cantools: decode_simple is used
 _decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
-           "Sample", "Command", "MALFORMED"]
+           "Sample", "Command", "MALFORMED", "UNRANGED_LIMIT"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +60,12 @@ _isfinite = math.isfinite
 _NEG_INF = -math.inf
 
 Sample = tuple[int, int, float, float]
+#: a data frame waiting for its time to be confirmed: (timestamp, route, samples with the
+#: frame's own timestamp, rolling counters (key, value, modulus))
+_Held = tuple[float, "_Route", list[Sample], list[tuple[tuple[int, int], int, int]]]
+#: the largest |value| of a mapped signal whose DBC gives no range (a payload beyond it is
+#: garbage, e.g. a float32 near its 3.4e38 limit; it would overflow the estimators)
+UNRANGED_LIMIT = 1e12
 Command = tuple[float, dict[str, float]]
 #: key of a queued command frame that could not be decoded (value: index in REASONS)
 MALFORMED = "__malformed__"
@@ -87,7 +93,7 @@ class ChannelMap:
 class DecodeStats:
     """Snapshot of the listener's counters (cumulative since start or reset)."""
 
-    received: int
+    received: int  # = decoded + ignored + rejected_total + held
     decoded: int
     ignored: int
     samples: int
@@ -96,6 +102,8 @@ class DecodeStats:
     bus_errors: int
     listener_errors: int
     rejected: dict[str, int]
+    clock_steps: int = 0  # confirmed steps of the frames' clock (each re-anchored)
+    held: int = 0  # frames waiting for a second frame to confirm their time
 
     @property
     def rejected_total(self) -> int:
@@ -171,17 +179,32 @@ class DecodingListener(can.Listener):
     """Decode frames of the mapped DBC signals into a bounded sample FIFO.
 
     ``capacity`` bounds the FIFO (samples); when full, new samples are dropped and counted
-    as ``overflow`` (the oldest are never overwritten). ``max_gap`` (s) bounds forward
-    timestamp jumps per frame id. Frames of ``command`` go, decoded, to a bounded command
-    queue read with :meth:`pop_commands`. ``on_message_received`` never raises.
+    as ``overflow`` (the oldest are never overwritten). Frame timing (:meth:`_timed`):
+    a timestamp within ``window`` s (default ``2·dt``) of the newest accepted one is
+    taken at once; one further away waits for a second frame to confirm it, so an
+    isolated outlier costs one frame, a pause of up to ``max_gap`` s gives gap bins, and
+    a clock step (back, or forward by more than ``max_gap``) re-anchors the frames after
+    it ``dt``-aligned past the bins before it. Frames of ``command`` go, decoded, to a
+    bounded command queue read with :meth:`pop_commands`, whatever their timestamp.
+    A mapped signal whose DBC gives no range accepts finite values with
+    ``|v| <= UNRANGED_LIMIT``. ``on_message_received`` never raises.
     """
 
     def __init__(self, db: Database, channels: ChannelMap, *, capacity: int = 65536,
                  command: MessageRef | None = None, max_gap: float = 3600.0,
-                 command_capacity: int = 64) -> None:
+                 command_capacity: int = 64, dt: float = 1.0,
+                 window: float | None = None) -> None:
         self.channels = channels
         self.capacity = int(capacity)
         self.max_gap = float(max_gap)
+        self.dt = float(dt)
+        self.window = 2.0 * self.dt if window is None else float(window)
+        self.confirm = 2  # frames that agree on a new time (the first one included)
+        self._anchor = -math.inf  # newest accepted timestamp since the last clock step
+        self._offset = 0.0  # s added to timestamps since the last clock step (k·dt)
+        self._held: list[_Held] = []
+        self._steps = 0
+        self._outliers_logged = 0
         self._buf: list[Sample] = []
         self._commands: deque[Command] = deque()
         self._command_capacity = command_capacity
@@ -189,13 +212,11 @@ class DecodingListener(can.Listener):
         self._routes: dict[int, _Route] = {}
         self._known = {frame_key(m.frame_id, bool(m.is_extended_frame)) for m in db.messages}
         self._last_counter: dict[tuple[int, int], int] = {}
-        self._last_t = -math.inf
-        self._resynced = False
         for g, pair in enumerate(channels.signals):
             for c, ref in enumerate(pair):
                 route = self._route(db, ref.message)
-                lo = -math.inf if ref.minimum is None else ref.minimum
-                hi = math.inf if ref.maximum is None else ref.maximum
+                lo = -UNRANGED_LIMIT if ref.minimum is None else ref.minimum
+                hi = UNRANGED_LIMIT if ref.maximum is None else ref.maximum
                 cnt = channels.counters[g][c] if channels.counters else None
                 mod = 256
                 if cnt is not None and cnt.maximum is not None:
@@ -213,13 +234,10 @@ class DecodingListener(can.Listener):
         return self._routes[ref.key]
 
     def resync(self) -> None:
-        """After a bus outage: forget each frame id's last timestamp, so the first frame
-        after the outage is neither a ``time_jump`` nor ``non_monotonic`` (the binner
-        decides what a jump means for the series). Counters are kept."""
+        """After a bus outage: forget the rolling counters' last values (frames were lost).
+        Time references are kept: the frames after the outage are timed as in a replay
+        of the raw log, which knows nothing of the outage (:meth:`_timed`)."""
         with self._lock:
-            for r in self._routes.values():
-                r.last_t = -math.inf
-            self._resynced = True
             self._last_counter.clear()
 
     def reset_counters(self) -> None:
@@ -256,10 +274,15 @@ class DecodingListener(can.Listener):
 
     def _receive(self, frames: Iterable[Frame]) -> None:
         """The receive path, for one frame or a batch (the caller holds the lock). State
-        used per frame is held in locals for the batch and written back at its end."""
+        used per frame is held in locals for the batch and written back at its end.
+
+        A data frame is decoded and range-checked, then timed (see :meth:`_timed`): in
+        the common case its timestamp lies within ``window`` s of the anchor (the newest
+        accepted frame) and at or after its id's previous frame, and it is accepted at
+        once; anything else goes through :meth:`_timed`, which holds or rejects it."""
         n, rej, routes, buf = self._n, self._rej, self._routes, self._buf
-        cap, max_gap, last_counter = self.capacity, self.max_gap, self._last_counter
-        last_t = self._last_t
+        cap = self.capacity
+        window, offset, a, held = self.window, self._offset, self._anchor, bool(self._held)
         it = iter(frames)
         while True:
             try:
@@ -282,37 +305,18 @@ class DecodingListener(can.Listener):
                     if len(data) != route.length:
                         rej[_WRONG_DLC] += 1
                         if route.is_command:
-                            self._malformed_command(route, t, data, "wrong_dlc", last_t)
+                            self._malformed_command(route, t, data, "wrong_dlc")
+                        continue
+                    if route.is_command:  # never subject to the data channel's time checks
+                        self._command(route, t, data)
                         continue
                     if not _isfinite(t):
                         rej[_BAD_TIMESTAMP] += 1
-                        continue
-                    ref_t = route.last_t
-                    if t < ref_t:
-                        rej[_NON_MONOTONIC] += 1
-                        continue
-                    if ref_t == _NEG_INF:  # first frame of this id (after a resync: no
-                        ref_t = _NEG_INF if self._resynced else last_t  # reference)
-                    if ref_t > _NEG_INF and t - ref_t > max_gap:
-                        rej[_TIME_JUMP] += 1
                         continue
                     try:
                         values = route.decode(data)
                     except Exception:
                         rej[_UNDECODABLE] += 1
-                        if route.is_command:
-                            self._malformed_command(route, t, data, "undecodable", last_t)
-                        continue
-                    if route.is_command:
-                        if len(self._commands) >= self._command_capacity:
-                            rej[_OVERFLOW] += 1
-                            continue
-                        self._commands.append((t, dict(values)))
-                        route.last_t = t
-                        if t > last_t:
-                            last_t = t
-                        n[1] += 1
-                        n[4] += 1
                         continue
                     extract = route.extract
                     if len(extract) == 1:  # the common case, one mapped signal: no lists
@@ -322,74 +326,184 @@ class DecodingListener(can.Listener):
                             n[2] += 1
                             continue
                         v = float(v)
-                        if not lo <= v <= hi:  # also false for NaN
+                        if not lo <= v <= hi:  # also false for NaN and +-inf
                             rej[_OUT_OF_RANGE] += 1
                             continue
-                        if len(buf) >= cap:
-                            rej[_OVERFLOW] += 1
+                        if (a - window <= t <= a + window and t >= route.last_t
+                                and not held and len(buf) < cap):
+                            route.last_t = t
+                            if t > a:
+                                a = t
+                            if cname is not None:
+                                cv = values.get(cname)
+                                if cv is not None:
+                                    self._count(ckey, int(cv), mod)
+                            buf.append((g, c, t + offset, v))
+                            n[1] += 1
+                            n[3] += 1
                             continue
-                        route.last_t = t
-                        if t > last_t:
-                            last_t = t
-                        if cname is not None:
-                            cv = values.get(cname)
-                            if cv is not None:
-                                cv = int(cv)
-                                prev = last_counter.get(ckey)
-                                if prev is not None and (cv - prev) % mod != 1 % mod:
-                                    n[5] += 1
-                                last_counter[ckey] = cv
-                        buf.append((g, c, t, v))
-                        n[1] += 1
-                        n[3] += 1
-                        continue
-                    out: list[Sample] = []
-                    counted: list[tuple[tuple[int, int], str, int]] = []
-                    bad = False
-                    for g, c, name, lo, hi, cname, mod, ckey in extract:
-                        v = values.get(name)
-                        if v is None:  # multiplexed signal not selected by this frame
+                        out = [(g, c, t, v)]
+                        counted = []
+                        if cname is not None and values.get(cname) is not None:
+                            counted.append((ckey, int(values[cname]), mod))
+                    else:
+                        out, counted = [], []
+                        bad = False
+                        for g, c, name, lo, hi, cname, mod, ckey in extract:
+                            v = values.get(name)
+                            if v is None:  # multiplexed signal not selected by this frame
+                                continue
+                            v = float(v)
+                            if not lo <= v <= hi:  # also false for NaN and +-inf
+                                bad = True
+                                break
+                            out.append((g, c, t, v))
+                            if cname is not None and values.get(cname) is not None:
+                                counted.append((ckey, int(values[cname]), mod))
+                        if bad:
+                            rej[_OUT_OF_RANGE] += 1
                             continue
-                        v = float(v)
-                        if not lo <= v <= hi:  # also false for NaN
-                            bad = True
-                            break
-                        out.append((g, c, t, v))
-                        if cname is not None:
-                            counted.append((ckey, cname, mod))
-                    if bad:
-                        rej[_OUT_OF_RANGE] += 1
-                        continue
-                    if not out:
-                        n[2] += 1
-                        continue
-                    if len(buf) + len(out) > cap:
-                        rej[_OVERFLOW] += 1
-                        continue
-                    route.last_t = t
-                    if t > last_t:
-                        last_t = t
-                    for ckey, cname, mod in counted:
-                        cv = values.get(cname)
-                        if cv is None:
+                        if not out:
+                            n[2] += 1
                             continue
-                        cv = int(cv)
-                        prev = last_counter.get(ckey)
-                        if prev is not None and (cv - prev) % mod != 1 % mod:
-                            n[5] += 1
-                        last_counter[ckey] = cv
-                    buf.extend(out)
-                    n[1] += 1
-                    n[3] += len(out)
+                    self._anchor = a
+                    try:
+                        self._timed((t, route, out, counted))
+                    finally:  # the state _timed left, even if it failed
+                        offset, a, held = self._offset, self._anchor, bool(self._held)
                 break  # every frame received
             except Exception as exc:  # one bad frame: count it, go on with the next
                 self._listener_errors += 1
                 log.exception("listener failed on a frame: %s", exc)
             finally:
-                self._last_t = last_t
+                self._anchor = a
+
+    # -- timing of data frames -----------------------------------------------------------
+    def _timed(self, frame: _Held) -> None:
+        """Time a decoded, in-range data frame ``(t, route, samples, counters)`` that the
+        fast path did not accept. With A the anchor (newest accepted timestamp) and W the
+        window:
+
+        * ``A - W <= t <= A + W``: accepted if at or after its id's previous frame
+          (else ``non_monotonic``); a frame held meanwhile was an outlier (rejected);
+        * otherwise it is *held*, with the frames that agree with it (each within
+          ``[C - W, C + max_gap]`` of the newest held one, C): the second such frame
+          confirms the new time. A forward move of at most ``max_gap`` s is a pause
+          (the bins between are gaps); a move back, or forward by more, is a clock
+          step: counted, logged, and the frames after it are shifted by a whole number
+          of bins (``offset``) so they start in a bin after every bin before it: the two
+          sides are never merged and no bin is invented. A held frame that a frame near
+          A contradicts, or that a frame agreeing with neither replaces, is rejected
+          (``time_jump`` ahead of A, ``non_monotonic`` behind it).
+        """
+        t = frame[0]
+        a, w, held = self._anchor, self.window, self._held
+        if a - w <= t <= a + w:
+            if held:
+                self._reject_held("contradicted by the next frame")
+            self._accept(frame)
+            return
+        if held:
+            c = held[-1][0]
+            if c - w <= t <= c + self.max_gap:
+                held.append(frame)
+                self._confirm()
+                return
+            self._reject_held("replaced by a frame that agrees with neither")
+        self._held.append(frame)  # waits for a second frame to confirm its time
+
+    def _confirm(self) -> None:
+        held, a = self._held, self._anchor
+        if len(held) < self.confirm:
+            return
+        first = held[0][0]
+        if a > _NEG_INF and not (a < first <= a + self.max_gap):
+            # a clock step: shift the new side past the last bin of the old one
+            mapped = a + self._offset
+            bins = math.ceil((a - first) / self.dt) + 1
+            self._offset += bins * self.dt
+            self._steps += 1
+            for r in self._routes.values():
+                r.last_t = _NEG_INF
+            self._anchor = _NEG_INF
+            log.warning("clock step of %+.3f s at frame time %.3f (id references "
+                        "re-anchored after %d agreeing frames): later frames shifted by "
+                        "%+.3f s, into bins after %.3f", first - a, mapped, len(held),
+                        self._offset, mapped)
+        self._held = []
+        for f in held:
+            self._accept(f)
+
+    def _accept(self, frame: _Held) -> None:
+        t, route, out, counted = frame
+        rej, n, buf = self._rej, self._n, self._buf
+        if t < route.last_t:
+            rej[_NON_MONOTONIC] += 1
+            return
+        if len(buf) + len(out) > self.capacity:
+            rej[_OVERFLOW] += 1
+            return
+        route.last_t = t
+        if t > self._anchor:
+            self._anchor = t
+        for ckey, cv, mod in counted:
+            self._count(ckey, cv, mod)
+        offset = self._offset
+        buf.extend([(g, c, tt + offset, v) for g, c, tt, v in out])
+        n[1] += 1
+        n[3] += len(out)
+
+    def _count(self, ckey: tuple[int, int], cv: int, mod: int) -> None:
+        prev = self._last_counter.get(ckey)
+        if prev is not None and (cv - prev) % mod != 1 % mod:
+            self._n[5] += 1
+        self._last_counter[ckey] = cv
+
+    def _reject_held(self, why: str) -> None:
+        a = self._anchor
+        for t, *_ in self._held:
+            self._rej[_TIME_JUMP if t > a else _NON_MONOTONIC] += 1
+        if self._outliers_logged < 20 or self._outliers_logged % 1000 == 0:
+            log.warning("%d frame(s) at t=%.3f rejected, %+.3f s from the bus's time "
+                        "%.3f (%s)", len(self._held), self._held[0][0],
+                        self._held[0][0] - a, a + self._offset, why)
+        self._outliers_logged += 1
+        self._held = []
+
+    def settle(self) -> None:
+        """End of the frames (end of run or of a log): frames still held are accepted
+        when nothing was accepted before them (a log of one frame), else rejected as
+        unconfirmed."""
+        with self._lock:
+            if not self._held:
+                return
+            if self._anchor == _NEG_INF and self._offset == 0.0:
+                held, self._held = self._held, []
+                for f in held:
+                    self._accept(f)
+            else:
+                self._reject_held("not confirmed before the end")
+
+    def _command(self, route: _Route, t: float, data: bytes | bytearray) -> None:
+        """Queue a command frame (decoded; a payload that cannot be decoded is queued
+        ``MALFORMED``). Its timestamp is only used to rate-limit commands (a timestamp
+        that is not finite becomes the newest frame time)."""
+        rej, n = self._rej, self._n
+        try:
+            values = route.decode(data)
+        except Exception:
+            rej[_UNDECODABLE] += 1
+            self._malformed_command(route, t, data, "undecodable")
+            return
+        if len(self._commands) >= self._command_capacity:
+            rej[_OVERFLOW] += 1
+            return
+        self._commands.append((t if _isfinite(t) else self.last_timestamp, dict(values)))
+        n[1] += 1
+        n[4] += 1
 
     def _malformed_command(self, route: _Route, t: float, data: bytes | bytearray,
-                           why: str, last_t: float) -> None:
+                           why: str) -> None:
         """A frame of the command id that cannot be a command (already counted as
         rejected): queue it marked ``MALFORMED`` so the daemon answers with a nack, with
         whatever signals the bytes present still give (to echo Command and Sequence)."""
@@ -402,7 +516,7 @@ class DecodingListener(can.Listener):
         except Exception:
             values = {}
         values[MALFORMED] = float(REASONS.index(why))
-        self._commands.append((t if _isfinite(t) else last_t, values))
+        self._commands.append((t if _isfinite(t) else self.last_timestamp, values))
 
     def on_error(self, exc: Exception) -> None:
         """Called by the Notifier when the bus (or a listener) raised: count and log; the
@@ -423,6 +537,13 @@ class DecodingListener(can.Listener):
             del buf[:max_items]
             return out
 
+    def frames_that_fit(self) -> int:
+        """How many frames an empty FIFO always takes without an overflow (each gives at
+        most one sample per mapped signal of its id, and up to ``confirm`` held frames
+        may be released with it): a replay pumps at least this often (back-pressure)."""
+        per = max((len(r.extract) for r in self._routes.values()), default=1) or 1
+        return max(1, self.capacity // per - self.confirm)
+
     def pending(self) -> int:
         """Samples waiting in the FIFO."""
         return len(self._buf)
@@ -440,14 +561,16 @@ class DecodingListener(can.Listener):
             n = list(self._n)
             rej = dict(zip(REASONS, self._rej, strict=True))
             lerr = self._listener_errors
+            steps, held = self._steps, len(self._held)
         return DecodeStats(received=n[0], decoded=n[1], ignored=n[2], samples=n[3],
                            commands=n[4], counter_jumps=n[5], bus_errors=n[6],
-                           listener_errors=lerr, rejected=rej)
+                           listener_errors=lerr, rejected=rej, clock_steps=steps, held=held)
 
     @property
     def last_timestamp(self) -> float:
-        """Timestamp (s) of the newest accepted frame (frame time); -inf before the first."""
-        return self._last_t
+        """Frame time (s): the newest accepted data frame's timestamp, shifted as the
+        samples are after a clock step (so it never moves back); -inf before the first."""
+        return self._anchor + self._offset
 
     @property
     def gyro_names(self) -> Sequence[str]:

@@ -24,7 +24,11 @@ class Ingest:
         return self.binner.add_many(self.listener.drain(max_items))
 
     def finish(self, until_t: float | None = None) -> list[Bin]:
-        """End of run (or a timeout at frame time ``until_t``): pump, then flush."""
+        """End of run (or a timeout at frame time ``until_t``): settle the frames the
+        listener holds (:meth:`~gyrostand.can.decode.DecodingListener.settle`), pump,
+        then flush."""
+        if until_t is None:
+            self.listener.settle()
         bins = self.pump()
         bins += self.binner.flush(until_t)
         return bins

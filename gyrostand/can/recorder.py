@@ -32,6 +32,7 @@ import logging
 import math
 import os
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -132,6 +133,16 @@ class CommitFile:
             os.close(self._fd)
 
 
+#: BLF header times before this (1990-01-01) are written as zeros, which read back as 0
+_BLF_MIN_START = 631152000.0
+#: how far before its first frame a BLF file starts (s): a clock that steps back by up to
+#: this much is still recorded faithfully in the same file
+BLF_MARGIN = 86400.0
+#: how far after its start a BLF file records to the nanosecond (s): object times are
+#: integer ns from the start, exact in a double below 2**53 ns
+BLF_SPAN = 2.0**53 / 1e9
+
+
 class FlushingBLFWriter(can.BLFWriter):
     """:class:`can.BLFWriter` on a :class:`CommitFile`, with a :meth:`flush` that leaves a
     complete, readable file on disk (the BLF header, whose start time every object's
@@ -139,12 +150,38 @@ class FlushingBLFWriter(can.BLFWriter):
 
     Uses ``BLFWriter._flush`` and ``_write_header`` (python-can 4.x), exactly what
     ``BLFWriter.stop`` does, without closing; ``tests/can`` checks the result is readable.
+
+    python-can's writer starts the file at its first frame and stores an earlier frame
+    with the start's time (an object time is unsigned); it also writes a start before
+    1990 as zeros (read back as 0). So the file starts :data:`BLF_MARGIN` before the first
+    frame (at 0 when that is before 1990), and :meth:`fits` says whether a frame's time
+    can be stored to the nanosecond; the :class:`Recorder` starts a new file for one that
+    cannot.
     """
 
     def __init__(self, path: str | Path, *, sync_on_close: bool = False,
                  **kwargs: object) -> None:
         file = CommitFile(path, sync_on_close=sync_on_close)
         super().__init__(file, **kwargs)  # type: ignore[arg-type]
+
+    @staticmethod
+    def start_for(t: float) -> float:
+        """The file start (s, ms-aligned as BLF stores it) for a first frame at ``t``."""
+        if t - BLF_MARGIN >= _BLF_MIN_START:
+            return int((t - BLF_MARGIN) * 1000) / 1000
+        return _BLF_MIN_START if t >= _BLF_MIN_START else 0.0
+
+    def fits(self, t: float) -> bool:
+        """Whether a frame at ``t`` (s) is stored with its own time in this file."""
+        start = self.start_timestamp
+        if start is None:
+            return True
+        return start <= t < start + BLF_SPAN
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if self.start_timestamp is None and math.isfinite(msg.timestamp):
+            self.start_timestamp = self.start_for(msg.timestamp)
+        super().on_message_received(msg)
 
     def flush(self) -> None:
         if self.file.closed:
@@ -160,20 +197,25 @@ class FlushingBLFWriter(can.BLFWriter):
 class Recorder(can.Listener):
     """A listener that writes every frame to ``path`` (suffix picks the format)."""
 
+    #: at most this many files are started for frames that do not fit the current BLF;
+    #: beyond it such frames are written as python-can writes them (counted unfaithful)
+    MAX_FILES = 64
+
     def __init__(self, path: str | Path, flush_interval: float = 1.0, *,
-                 durable: bool = False) -> None:
-        """``durable``: :meth:`stop` fdatasyncs a BLF before closing it (see :meth:`sync`)."""
+                 durable: bool = False,
+                 next_path: Callable[[], Path] | None = None) -> None:
+        """``durable``: :meth:`stop` fdatasyncs a BLF before closing it (see :meth:`sync`).
+        ``next_path()``: the file to continue in when a frame's time does not fit the BLF
+        (:meth:`FlushingBLFWriter.fits`; default ``<stem>-<n><suffix>`` beside ``path``);
+        the files, in order, replay to the frames received (:attr:`files`)."""
         self.path = Path(path)
         self.flush_interval = float(flush_interval)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            if self.path.suffix.lower() == ".blf":
-                self._writer: can.Listener = FlushingBLFWriter(self.path,
-                                                               sync_on_close=durable)
-            else:
-                self._writer = can.Logger(self.path)
-        except Exception as exc:
-            raise CanEdgeError(f"{self.path}: cannot open frame log: {exc}") from exc
+        self.durable = durable
+        self.next_path = next_path
+        self.files = [self.path]
+        self.unfaithful = 0
+        self._writer = self._open(self.path)
         self._lock = threading.Lock()
         self._last_flush_t = -math.inf
         self.frames = 0
@@ -182,6 +224,28 @@ class Recorder(can.Listener):
         self.unrecordable = 0
         self.failed: OutputError | None = None
         self._stopped = False
+
+    def _open(self, path: Path) -> can.Listener:
+        try:
+            if path.suffix.lower() == ".blf":
+                return FlushingBLFWriter(path, sync_on_close=self.durable)
+            return can.Logger(path)
+        except Exception as exc:
+            raise CanEdgeError(f"{path}: cannot open frame log: {exc}") from exc
+
+    def _continue_in_new_file(self, t: float) -> None:
+        """Close the current BLF and go on in the next file (a frame at ``t`` does not fit
+        it: a clock step back beyond its margin, or a stray timestamp)."""
+        old = self._writer
+        path = (self.next_path() if self.next_path is not None else
+                self.path.with_name(f"{self.path.stem}-{len(self.files) + 1}"
+                                    f"{self.path.suffix}"))
+        old.stop()  # durable: fdatasync'ed before closing (sync_on_close)
+        self._writer = self._open(path)
+        self.files.append(path)
+        log.warning("frame at t=%.6f does not fit %s (stored to the ns from its start "
+                    "%.3f): the raw log continues in %s", t, old.file.name,  # type: ignore[attr-defined]
+                    old.start_timestamp, path.name)  # type: ignore[attr-defined]
 
     def on_message_received(self, msg: can.Message) -> None:
         try:
@@ -193,11 +257,17 @@ class Recorder(can.Listener):
                 if not math.isfinite(msg.timestamp):  # no log format can store it
                     self.unrecordable += 1
                     return
+                w = self._writer
+                if isinstance(w, FlushingBLFWriter) and not w.fits(msg.timestamp):
+                    if len(self.files) < self.MAX_FILES:
+                        self._continue_in_new_file(msg.timestamp)
+                    else:
+                        self.unfaithful += 1
                 self._writer.on_message_received(msg)
                 self.frames += 1
                 t = msg.timestamp
-                if self._last_flush_t == -math.inf:
-                    self._last_flush_t = t
+                if self._last_flush_t == -math.inf or t < self._last_flush_t:
+                    self._last_flush_t = t  # (also after a clock step back)
                 elif t - self._last_flush_t >= self.flush_interval:
                     self._flush_locked()
                     self._last_flush_t = t

@@ -24,9 +24,9 @@ import can
 
 from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
-from gyrostand.can.logread import ReaderProcess, read_log, read_logs
+from gyrostand.can.logread import LogDamage, ReaderProcess, read_log, read_logs
 
-__all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES"]
+__all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage"]
 
 #: log files (in total) at least this large are parsed in a reader process when
 #: ``parallel`` is None; below it the process start (~0.2 s) is not worth it
@@ -55,17 +55,23 @@ def paced(messages: Iterable[can.Message], speed: float = 1.0,
 def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
            ingest: Ingest, listeners: Sequence[can.Listener] = (), *,
            realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
-           parallel: bool | None = None) -> Iterator[list[Bin]]:
+           parallel: bool | None = None, damage: LogDamage | None = None
+           ) -> Iterator[list[Bin]]:
     """Feed frames (or the frames of a log file, or of several read one after the other)
     to ``ingest.listener`` and ``listeners``; yield the bins that close, batch by batch,
     and at the end the flushed last bins.
 
-    ``pump_every`` frames between pumps; the listener's FIFO must hold that many frames'
-    samples (the default fits the default capacity). ``parallel``: parse log files in a
+    ``pump_every`` frames between pumps, at most what the listener's FIFO always holds
+    (:meth:`~gyrostand.can.decode.DecodingListener.frames_that_fit`): a replay never
+    overflows it, whatever ``sampling.buffer`` is. ``parallel``: parse log files in a
     reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
     process may use two CPUs or more; never with ``realtime`` or extra ``listeners``,
-    which take :class:`can.Message` objects).
+    which take :class:`can.Message` objects). ``damage`` receives what reading the
+    log files skipped (:class:`~gyrostand.can.logread.LogDamage`).
     """
+    damage = damage if damage is not None else LogDamage()
+    # back-pressure: pump before the listener's FIFO can overflow (a replay never drops)
+    pump_every = max(1, min(int(pump_every), ingest.listener.frames_that_fit()))
     paths: list[Path] | None = None
     if isinstance(messages, (str, Path)):
         paths = [Path(messages)]
@@ -75,9 +81,9 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     if paths is not None and not realtime and not listeners and parallel is not False:
         if parallel or (_cores() >= 2 and sum(p.stat().st_size for p in paths if p.is_file())
                         >= PARALLEL_MIN_BYTES):
-            yield from _replay_parallel(paths, ingest, pump_every)
+            yield from _replay_parallel(paths, ingest, pump_every, damage)
             return
-    frames: Iterable[can.Message] = (read_logs(paths) if paths is not None
+    frames: Iterable[can.Message] = (read_logs(paths, damage) if paths is not None
                                      else messages)  # type: ignore[assignment]
     if realtime:
         frames = paced(frames, speed)
@@ -106,18 +112,21 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int
-                     ) -> Iterator[list[Bin]]:
+def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int,
+                     damage: LogDamage) -> Iterator[list[Bin]]:
     """:func:`replay` of log files parsed by a reader process: batches of ``pump_every``
     frames, each received then pumped, as the serial loop pumps every ``pump_every``."""
     reader = ReaderProcess(paths, batch=pump_every)
     receive, pump = ingest.listener.receive_frames, ingest.pump
-    for frames in reader:
-        receive(frames)
-        if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
-            bins = pump()
-            if bins:
-                yield bins
+    try:
+        for frames in reader:
+            receive(frames)
+            if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
+                bins = pump()
+                if bins:
+                    yield bins
+    finally:
+        damage.add(reader.damage.as_dict())
     bins = ingest.finish()
     if bins:
         yield bins

@@ -1,9 +1,11 @@
-"""Options and printing shared by the run/replay/simulate/demo subcommands."""
+"""Options, printing and argument types shared by the run/replay/simulate/demo subcommands."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
+from collections.abc import Callable
 from types import MappingProxyType
 from typing import Any, TextIO
 
@@ -65,3 +67,22 @@ def print_outcome(outcome: RunOutcome, out: TextIO,
         print(f"{label} {path}" if path.is_file() else f"{label} not written", file=out)
     for err in outcome.stats.get("unwritten", []):
         print(f"error: {err}", file=out)
+
+
+def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[str], float]:
+    """An argparse ``type``: a finite float (``positive``: > 0; ``nonnegative``: >= 0);
+    anything else is a usage error naming the argument (exit status 2)."""
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text[:40]!r}") from None
+        if not math.isfinite(x):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text[:40]!r}")
+        if positive and not x > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text[:40]!r}")
+        if nonnegative and x < 0:
+            raise argparse.ArgumentTypeError(f"must be >= 0, got {text[:40]!r}")
+        return x
+    parse.__name__ = "number"
+    return parse

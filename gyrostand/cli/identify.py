@@ -13,6 +13,8 @@ from ..core.identify import IDENTIFIERS, identify
 from ..core.lkf import VARIANTS
 from ..core.model import Model
 from ..core.terms import VOCABULARY
+from ..errors import ConfigError
+from .common import number
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -31,8 +33,8 @@ def add_parser(sub: Any) -> None:
                    help=f"comma-separated model terms (default {DEFAULT_MODEL}) of: "
                         f"{', '.join(VOCABULARY)}; 'white' measurement noise is always "
                         "included")
-    p.add_argument("--sigma", type=float, default=None,
-                   help="known stationary drift std σ (markov.sigma), as in the paper")
+    p.add_argument("--sigma", type=number(positive=True), default=None,
+                   help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     g = p.add_argument_group("lsq options")
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
@@ -42,10 +44,10 @@ def add_parser(sub: Any) -> None:
                    help="relin (default): the converging filter run to its fixed point "
                         "(re-linearised, noise levels re-estimated); paper: the paper's "
                         "single pass at a fixed point (warns when it stays there or β <= 0)")
-    g.add_argument("--beta0", type=float, default=None,
+    g.add_argument("--beta0", type=number(positive=True), default=None,
                    help="linearisation point β₀ (1/s); relin: its start (default: the "
                         "lsq/ml fit), paper: default the paper's 1e-4")
-    g.add_argument("--gamma0", type=float, default=None, help="linearisation point γ₀")
+    g.add_argument("--gamma0", type=number(), default=None, help="linearisation point γ₀")
     g.add_argument("--iterate", action="store_true",
                    help="paper variant: re-linearise at the previous estimate until it "
                         "settles")
@@ -69,6 +71,9 @@ def options_for(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
+    if args.method == "lkf" and args.beta0 is not None and args.beta0 * samples.dt >= 1.0:
+        raise ConfigError(f"--beta0 {args.beta0:g} 1/s must be below 1/dt = "
+                          f"{1.0 / samples.dt:g} of {args.samples}")
     result = identify(samples, model, args.method, **options_for(args))
     if args.json:
         json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)

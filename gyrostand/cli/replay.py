@@ -13,7 +13,7 @@ from ..config import load_config
 from ..errors import CanEdgeError
 from ..session.offline import run_replay
 from ..session.outputs import raw_segments
-from .common import print_outcome
+from .common import number, print_outcome
 
 
 def add_parser(sub: Any) -> None:
@@ -29,7 +29,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", default=None, metavar="DIR",
                    help="parent folder of the run folder (default: session.output)")
     p.add_argument("--realtime", action="store_true", help="pace frames to their timestamps")
-    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: x real time")
+    p.add_argument("--speed", type=number(positive=True), default=1.0,
+                   help="with --realtime: x real time (> 0)")
     p.add_argument("--reader", choices=("auto", "process", "inline"), default="auto",
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "

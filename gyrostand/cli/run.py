@@ -9,7 +9,7 @@ from typing import Any
 
 from ..config import SessionConfig, load_config
 from ..session.live import run_live
-from .common import add_bus_args, print_outcome, with_bus_overrides
+from .common import add_bus_args, number, print_outcome, with_bus_overrides
 
 
 def add_parser(sub: Any) -> None:
@@ -18,10 +18,11 @@ def add_parser(sub: Any) -> None:
         description="Listen on the session's bus, record every frame, bin, identify online, "
                     "answer with result/status frames; on SIGINT/SIGTERM, --duration or a "
                     "stop command write the final fit and report. Prints 'ready: RUN_DIR' "
-                    "once listening.")
+                    "once listening ('waiting: ...' first while the bus cannot be opened "
+                    "yet, with reconnect.at_start).")
     p.add_argument("config", help="YAML session file")
     add_bus_args(p)
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=number(positive=True), default=None, metavar="S",
                    help="stop after S s of frame time from the first frame (or S+5 s of "
                         "wall time when frames stop flowing)")
     p.add_argument("--out", default=None, metavar="DIR",
@@ -49,8 +50,11 @@ def run(args: argparse.Namespace) -> int:
     def ready(run_dir) -> None:
         print(f"ready: {run_dir}", flush=True)
 
+    def waiting(text: str) -> None:
+        print(f"waiting: {text}", flush=True)
+
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
-                       on_ready=ready, resume=args.resume)
+                       on_ready=ready, resume=args.resume, on_waiting=waiting)
     print_outcome(outcome, sys.stdout)
     return 0 if outcome.ok else 1
 

@@ -15,7 +15,7 @@ from ..can.framesim import send_frames, write_log
 from ..config import load_config
 from ..errors import ConfigError
 from ..session.offline import simulated_frames
-from .common import add_bus_args, with_bus_overrides
+from .common import add_bus_args, number, with_bus_overrides
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,8 @@ def add_parser(sub: Any) -> None:
                       help="send paced to the frame timestamps")
     pace.add_argument("--fast", dest="realtime", action="store_false",
                       help="send as fast as possible")
-    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: x real time")
+    p.add_argument("--speed", type=number(positive=True), default=1.0,
+                   help="with --realtime: x real time (> 0)")
     p.set_defaults(func=run)
 
 

@@ -117,7 +117,7 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
             out.fits[m] = str(exc)
         return out
     out.observed = samples.n_observed
-    errors = (GyrostandError, ValueError, np.linalg.LinAlgError)
+    errors = (GyrostandError, ValueError, KeyError, np.linalg.LinAlgError)
     for method in final_methods(gyro):
         label = method
         if method == "lkf" and online_lkf is not None:
@@ -158,7 +158,8 @@ def _batch_lkf_options(model: Model, gyro: GyroConfig, samples: Samples,
 def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
                       finals: Sequence[GyroFinal], stats: Mapping[str, Any]) -> None:
     doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
-           "run_dir": str(run_dir), "dt": cfg.sampling.dt, "state": "finished",
+           "run_dir": str(run_dir), "dt": cfg.sampling.dt,
+           "epoch": cfg.sampling.epoch, "state": "finished",
            "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
     write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
 
@@ -169,7 +170,8 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
     running or crashed run folder is already a run folder for ``diagnose`` / ``report``;
     the final one replaces it (both written atomically)."""
     doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
-           "run_dir": str(run_dir), "dt": cfg.sampling.dt, "state": "running",
+           "run_dir": str(run_dir), "dt": cfg.sampling.dt,
+           "epoch": cfg.sampling.epoch, "state": "running",
            "gyros": {g.name: {"model": list(g.model), "t0": None, "bins": 0, "gaps": 0,
                               "observed": 0, "fits": {}, "online": {}} for g in cfg.gyros},
            "stats": {"stop_reason": None}}

@@ -14,8 +14,8 @@ dying), the daemon logs the outage, closes the bus, and reopens it with exponent
 (``reconnect.first_delay`` doubling up to ``reconnect.max_delay`` s) for up to
 ``reconnect.max_time`` s, meanwhile binning what it has and keeping the files flushed.
 When the bus is back it continues in the same run: frames of the outage are missing, so
-its bins are gaps (n = 0; an outage longer than ``sampling.max_gap`` shows as a jump of
-``t``), never invented. The outage count is in the heartbeat (page 2, ``Outages``), in
+its bins are gaps (n = 0; after an outage longer than ``sampling.max_gap`` the frames are
+timed as after a clock step, as a replay of the raw log times them), never invented. The outage count is in the heartbeat (page 2, ``Outages``), in
 ``run.log`` and in ``result.json`` (``stats.bus``). Without a bus after ``max_time`` s the
 run ends in state ``fault``.
 
@@ -64,6 +64,7 @@ from .outputs import (
     SegmentLog,
     check_writable,
     make_run_dir,
+    next_raw_segment,
     read_segments,
 )
 from .pipeline import BusSink, Pipeline, RunOutcome
@@ -167,12 +168,15 @@ def _permanent(exc: CanEdgeError) -> bool:
 
 
 def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
-                      handle_signals: bool = True) -> can.BusABC:
+                      handle_signals: bool = True,
+                      on_waiting: Callable[[str], None] | None = None) -> can.BusABC:
     """Open ``cfg.bus``; while it cannot be opened, retry with backoff
     (``reconnect.first_delay`` doubling up to ``max_delay``) for ``reconnect.at_start`` s.
     Raises :class:`CanEdgeError` (the last failure, with the time waited) when the time is
     up, at once for a bus that can never open, or when ``stop`` is set / SIGINT or
-    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting."""
+    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting.
+    ``on_waiting(text)`` is called once when the waiting begins (the CLI prints it: a
+    signal for whoever starts the bus after the daemon)."""
     rc = cfg.reconnect
     t0 = time.monotonic()
     delay, attempts = rc.first_delay, 0
@@ -195,6 +199,9 @@ def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
                 if attempts == 1:
                     log.warning("%s; waiting for the bus, up to %g s (reconnect.at_start)",
                                 exc, rc.at_start)
+                    if on_waiting is not None:
+                        on_waiting(f"for the bus, up to {rc.at_start:g} s "
+                                   f"(reconnect.at_start)")
                     if handle_signals and threading.current_thread() is threading.main_thread():
                         for sig in (signal.SIGINT, signal.SIGTERM):
                             old[sig] = signal.signal(sig, lambda *_: stop.set())
@@ -218,7 +225,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
              stop_event: threading.Event | None = None, handle_signals: bool = True,
              poll: float = 0.002, truths: dict[str, dict[str, float]] | None = None,
              resume: str | Path | bool | None = None,
-             notify: ServiceNotify | None = None) -> RunOutcome:
+             notify: ServiceNotify | None = None,
+             on_waiting: Callable[[str], None] | None = None) -> RunOutcome:
     """Run the daemon on ``cfg.bus`` until stopped; return the outcome (paths, fits).
 
     ``on_ready(run_dir)`` is called once the Notifier listens (frames sent before that are
@@ -226,6 +234,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     ``resume``: continue a run folder instead of starting one (a path, or ``True`` / ``""``
     for the session's newest run folder under ``out``). ``notify``: systemd notifications
     (default: from ``NOTIFY_SOCKET`` / ``WATCHDOG_USEC`` in the environment).
+    ``on_waiting(text)``: called when the daemon begins to wait for a bus that cannot be
+    opened yet.
     """
     notify = notify if notify is not None else ServiceNotify.from_environ()
     state = None
@@ -240,7 +250,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             raise
         raw_path = state.segment
     try:
-        bus = open_bus_at_start(cfg, stop_event, handle_signals)
+        bus = open_bus_at_start(cfg, stop_event, handle_signals, on_waiting)
     except BaseException:
         if lock is not None:
             lock.release()
@@ -263,7 +273,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     sink = BusSink(None)
     link: BusLink | None = None
     try:
-        recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync)
+        recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync,
+                            next_path=lambda: next_raw_segment(run_dir))
 
         def commit_raw() -> None:  # before any bin reaches samples.csv
             recorder.sync() if cfg.fsync else recorder.flush()
@@ -305,6 +316,8 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             "recorder": {"file": raw_path.name, "frames": recorder.frames,
                          "flushes": recorder.flushes, "errors": recorder.errors,
                          "unrecordable": recorder.unrecordable,
+                         "files": [p.name for p in recorder.files],
+                         "unfaithful": recorder.unfaithful,
                          "failed": str(recorder.failed) if recorder.failed else None},
             "bus": {"channel": link.channel,
                     "watch_errors": link.watch_errors + link.watch.errors,

@@ -11,6 +11,7 @@ binned too.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
@@ -20,13 +21,14 @@ import numpy as np
 
 from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
+from ..can.logread import LogDamage
 from ..can.replay import replay
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
 from ..core.simulate import simulate
-from ..errors import ConfigError
-from .outputs import RunLog, make_run_dir
+from ..errors import ConfigError, GyrostandError
+from .outputs import RunLog, make_run_dir, write_atomic
 from .pipeline import NullSink, Pipeline, RunOutcome
 
 __all__ = ["run_replay", "simulated_truths", "simulated_frames", "truth_params"]
@@ -53,16 +55,47 @@ def run_replay(cfg: SessionConfig,
         source = log_path  # type: ignore[assignment]
     run_dir = make_run_dir(out or cfg.output, cfg.name)
     runlog = RunLog(run_dir)
+    damage = LogDamage()
     try:
         pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}")
         log.info("replaying %s into %s", what, run_dir)
         for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
-                           pump_every=pump_every, parallel=parallel):
+                           pump_every=pump_every, parallel=parallel, damage=damage):
             pipe.step(bins)
         pipe.step([])
-        return pipe.finish("end of log", truths=truths)
+        if damage.total:
+            log.warning("%s: %d damaged part(s) of the log skipped (%d containers, %d "
+                        "truncated, %d lines)", what, damage.total, damage.containers,
+                        damage.truncated, damage.lines)
+        return pipe.finish("end of log", truths=truths,
+                           extra_stats={"log": damage.as_dict()})
+    except BaseException as exc:
+        _mark_failed(run_dir / "result.json", cfg, f"replay of {what}", run_dir, exc)
+        raise
     finally:
         runlog.close()
+
+
+def _mark_failed(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
+                 exc: BaseException) -> None:
+    """A replay that did not finish: ``result.json`` says ``"state": "failed"`` and why
+    (it would otherwise stay ``running``, as if a daemon were still writing it)."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(doc, dict):
+            raise ValueError("not an object")
+    except (OSError, ValueError):
+        doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
+               "run_dir": str(run_dir), "dt": cfg.sampling.dt, "gyros": {}, "stats": {}}
+    why = f"{type(exc).__name__}: {exc}" if not isinstance(exc, GyrostandError) else str(exc)
+    doc["state"] = "failed"
+    doc["error"] = why[:2000]
+    if isinstance(doc.get("stats"), dict):
+        doc["stats"]["stop_reason"] = f"failed: {why[:2000]}"
+    try:
+        write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    except (OSError, ValueError) as err:
+        log.error("%s: cannot mark the replay failed: %s", path, err)
 
 
 def truth_params(cfg: SessionConfig) -> dict[str, dict[str, float]]:

@@ -108,18 +108,20 @@ def check_writable(run_dir: Path) -> None:
 _RUN_RE = re.compile(r"^(?P<stamp>\d{8}-\d{6})(?:-(?P<n>\d+))?$")
 
 
-def latest_run_dir(output: str | Path, name: str) -> Path:
-    """The newest ``<output>/<name>-<stamp>[-n]`` folder (by its UTC stamp, then n)."""
+def latest_run_dir(output: str | Path, name: str, *, live_only: bool = False) -> Path:
+    """The newest ``<output>/<name>-<stamp>[-n]`` folder (by its UTC stamp, then n);
+    ``live_only``: only folders of live runs (with a raw log: a replay folder has none)."""
     found: list[tuple[str, int, Path]] = []
     out = Path(output)
     if out.is_dir():
         for p in out.iterdir():
             if p.is_dir() and p.name.startswith(f"{name}-"):
                 m = _RUN_RE.match(p.name[len(name) + 1:])
-                if m:
+                if m and not (live_only and not raw_segments(p)):
                     found.append((m["stamp"], int(m["n"] or 1), p))
     if not found:
-        raise OutputError(f"{out}: no run folder of session {name!r} to resume")
+        kind = "live run folder (with raw.blf)" if live_only else "run folder"
+        raise OutputError(f"{out}: no {kind} of session {name!r} to resume")
     return max(found)[2]
 
 

@@ -140,10 +140,13 @@ class TokenBucket:
         self.t = -math.inf
 
     def take(self, t: float) -> bool:
+        """A timestamp earlier than the last one (a command frame of a clock that stepped
+        back, or after a stray future one) refills nothing and becomes the reference, so
+        one wild timestamp cannot block later commands."""
         if math.isfinite(t):
             if self.t > -math.inf and t > self.t:
                 self.tokens = min(self.capacity, self.tokens + (t - self.t) * self.rate)
-            self.t = max(self.t, t)
+            self.t = t
         if self.tokens >= 1.0:
             self.tokens -= 1.0
             return True
@@ -180,7 +183,7 @@ class Pipeline:
         self.channels = ChannelMap.from_config(cfg)
         self.listener = DecodingListener(cfg.db, self.channels, capacity=cfg.sampling.buffer,
                                          command=cfg.responses.command,
-                                         max_gap=cfg.sampling.max_gap)
+                                         max_gap=cfg.sampling.max_gap, dt=cfg.sampling.dt)
         self.binner = Binner(self.channels.gyros, cfg.sampling.dt, cfg.sampling.epoch,
                              cfg.sampling.max_gap)
         self.ingest = Ingest(self.listener, self.binner)

@@ -21,17 +21,21 @@ What it does:
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..can.binning import read_samples_csv
 from ..config import SessionConfig
-from ..errors import OutputError
-from .outputs import latest_run_dir, next_raw_segment
+from ..core.model import Model
+from ..errors import ConfigError, OutputError
+from .online import ONLINE
+from .outputs import estimate_columns, latest_run_dir, next_raw_segment
 
-__all__ = ["ResumeState", "prepare_resume", "find_resume_dir"]
+__all__ = ["ResumeState", "prepare_resume", "find_resume_dir", "check_compatible"]
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +69,64 @@ def find_resume_dir(cfg: SessionConfig, where: str | Path | None,
         if not p.is_dir():
             raise OutputError(f"{p}: no such run folder to resume")
         return p
-    return latest_run_dir(out or cfg.output, cfg.name)
+    return latest_run_dir(out or cfg.output, cfg.name, live_only=True)
+
+
+def _terms(model: Any) -> tuple[str, ...] | None:
+    try:
+        return tuple(Model.parse(list(model)).names)
+    except Exception:  # a model this version cannot parse: compare as written
+        return tuple(str(m) for m in model)
+
+
+def check_compatible(cfg: SessionConfig, run_dir: Path) -> None:
+    """Refuse to resume ``run_dir`` with a session whose ``sampling.dt``,
+    ``sampling.epoch``, a gyro's ``model`` or its online ``identifiers`` differ from the
+    folder's (``result.json``, each ``estimates.csv`` header): its bins, grid and
+    estimate columns would no longer match. Raises :class:`ConfigError` naming the key."""
+    src = cfg.path
+    doc: Any = None
+    rp = run_dir / "result.json"
+    try:
+        doc = json.loads(rp.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        log.warning("%s: unreadable; resuming without comparing dt and epoch", rp)
+    if isinstance(doc, dict):
+        dt = doc.get("dt")
+        if isinstance(dt, (int, float)) and not isinstance(dt, bool) and \
+                float(dt) != cfg.sampling.dt:
+            raise ConfigError(f"{src}: sampling.dt: {cfg.sampling.dt:g} differs from the run "
+                              f"folder's {float(dt):g} ({rp}): resume with the session it "
+                              f"was started with")
+        if "epoch" in doc and doc["epoch"] != cfg.sampling.epoch:
+            raise ConfigError(f"{src}: sampling.epoch: {cfg.sampling.epoch!r} differs from "
+                              f"the run folder's {doc['epoch']!r} ({rp})")
+        gyros = doc.get("gyros")
+        for i, g in enumerate(cfg.gyros):
+            was = gyros.get(g.name) if isinstance(gyros, dict) else None
+            model = was.get("model") if isinstance(was, dict) else None
+            if isinstance(model, list) and _terms(model) != _terms(g.model):
+                raise ConfigError(f"{src}: gyros[{i}].model: {list(g.model)} differs from "
+                                  f"the run folder's {model} ({rp})")
+    for i, g in enumerate(cfg.gyros):
+        ep = run_dir / g.name / "estimates.csv"
+        try:
+            with ep.open(encoding="utf-8", errors="replace") as fh:
+                header = fh.readline().rstrip("\n").split(",")
+        except OSError:
+            continue
+        if header == [""]:
+            continue
+        online = [x for x in g.identifiers if x in ONLINE]
+        want = estimate_columns(online, Model.parse(g.model).param_names)
+        if header != want:
+            was = list(dict.fromkeys(c.split(":", 1)[0] for c in header[1:]))
+            key = "identifiers" if was != online else "model"
+            raise ConfigError(f"{src}: gyros[{i}].{key}: the online estimates "
+                              f"({', '.join(online) or 'none'}; {len(want)} columns) differ "
+                              f"from the run folder's ({', '.join(was) or 'none'}; "
+                              f"{len(header)} columns, {ep}): resume with the session it "
+                              f"was started with")
 
 
 def _cut_torn_tail(path: Path) -> int:
@@ -110,7 +171,9 @@ def _cut_estimates_after(path: Path, t_last: float | None) -> float | None:
 
 
 def prepare_resume(cfg: SessionConfig, run_dir: Path) -> ResumeState:
-    """Check and repair the run folder's growing files; return what to continue from."""
+    """Check and repair the run folder's growing files; return what to continue from.
+    A session that does not match the folder is refused first (:func:`check_compatible`)."""
+    check_compatible(cfg, run_dir)
     if not any((run_dir / g.name / "samples.csv").is_file() for g in cfg.gyros):
         raise OutputError(f"{run_dir}: not a run folder of session {cfg.name!r} (no "
                           f"<gyro>/samples.csv of gyros {', '.join(g.name for g in cfg.gyros)})")

@@ -32,7 +32,8 @@ def smooth_truth(n: int = 60, k: int = 0):
 def make_ingest(cfg, capacity: int | None = None) -> Ingest:
     cm = ChannelMap.from_config(cfg)
     lst = DecodingListener(cfg.db, cm, capacity=capacity or cfg.sampling.buffer,
-                           command=cfg.responses.command, max_gap=cfg.sampling.max_gap)
+                           command=cfg.responses.command, max_gap=cfg.sampling.max_gap,
+                           dt=cfg.sampling.dt)
     return Ingest(lst, Binner(cm.gyros, cfg.sampling.dt, cfg.sampling.epoch,
                               cfg.sampling.max_gap))
 

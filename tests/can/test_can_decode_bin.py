@@ -138,13 +138,17 @@ def test_remaining_reasons(demo_cfg):
     ignored = enc.encode("GYRO_DRIFT_2", {"Drift": 1.0}, timestamp=T0 + 1)
     lst.on_message_received(ignored)  # in the DBC but not mapped: ignored, not rejected
     s = lst.stats()
-    assert s.rejected["time_jump"] == 1 and s.ignored == 1
+    # the jump waits for a second frame to confirm its time
+    assert s.held == 1 and s.rejected["time_jump"] == 0 and s.ignored == 1
     # counters 16..19 were refused (overflow), so 15 -> 20 after them is no jump in the
     # accepted sequence: 0..15 accepted, next accepted would be checked against 15
     assert s.counter_jumps == 0
     ok = enc.encode("GYRO_DRIFT_1", {"Drift": 1.0, "Counter": 18}, timestamp=T0 + 1)
-    lst.on_message_received(ok)
-    assert lst.stats().counter_jumps == 1  # 15 -> 18
+    lst.on_message_received(ok)  # back at the bus's time: the jump was an outlier
+    s = lst.stats()
+    assert s.rejected["time_jump"] == 1 and s.held == 0
+    assert s.counter_jumps == 1  # 15 -> 18
+    assert s.received == s.decoded + s.ignored + s.rejected_total
 
 
 def test_listener_never_raises_and_on_error_keeps_notifier(demo_cfg, rig_factory):

@@ -149,8 +149,9 @@ def test_three_outages_of_growing_length(tmp_path):
 
 
 def test_daemon_waits_for_a_bus_that_is_not_up_yet(tmp_path):
-    """``reconnect.at_start``: the server comes up 2 s after the daemon started; the
-    daemon retries with backoff, opens the bus, runs, and stops on a command."""
+    """``reconnect.at_start``: the server comes up 1 s after the daemon said it waits
+    (its ``waiting:`` line, not a sleep that races the daemon's start-up); the daemon
+    retries with backoff, opens the bus, runs, and stops on a command."""
     srv = RemoteServer()  # its port is chosen, nothing listens there yet
     cfg_path = write_config(
         tmp_path / "late.yaml", tmp_path / "runs",
@@ -158,15 +159,17 @@ def test_daemon_waits_for_a_bus_that_is_not_up_yet(tmp_path):
         sim={"duration": 20.0, "rates": {"drift": 20, "temperature": 10}},
         reconnect={"at_start": 60, "first_delay": 0.1, "max_delay": 0.4})
     cfg = load_config(cfg_path)
-    t0 = time.monotonic()
     daemon = Daemon(cfg_path, "--out", str(tmp_path / "runs"))
     stand = None
     try:
-        time.sleep(2.0)
+        waiting = daemon.wait_for("waiting: ", timeout=60)
+        assert "for the bus, up to 60 s (reconnect.at_start)" in waiting
+        t0 = time.monotonic()
+        time.sleep(1.0)  # the daemon is known to be waiting: this is no race
         assert daemon.proc.poll() is None  # still waiting, not failed
         srv.start()
         run_dir = daemon.run_dir(daemon.wait_for("ready: ", timeout=30))
-        assert time.monotonic() - t0 >= 2.0
+        assert time.monotonic() - t0 >= 1.0
         stand = can.Bus(interface="remote", channel=srv.url, preserve_timestamps=True)
         frames = list(simulated_frames(cfg))
         send_paced(stand, frames, SPEED)
@@ -181,7 +184,7 @@ def test_daemon_waits_for_a_bus_that_is_not_up_yet(tmp_path):
     assert rc == 0, err
     assert "waiting for the bus, up to 60 s (reconnect.at_start)" in err
     opened = re.search(r"bus opened after ([\d.]+) s \((\d+) attempts\)", err)
-    # (the daemon's own start-up takes part of the 2 s)
+    # 1 s at delays 0.1, 0.2, 0.4, 0.4, ...: at least 4 attempts before the server is up
     assert opened and float(opened.group(1)) >= 1.0 and int(opened.group(2)) >= 4, err
     doc = json.loads((run_dir / "result.json").read_text())
     assert doc["gyros"]["az"]["bins"] >= 19

@@ -125,13 +125,19 @@ def check(msgs):
     drained = listener.drain()
     n_samples += len(drained)
     bins += binner.add_many(drained)
-    bins += binner.flush()
     s = listener.stats()
     EXAMPLES["n"] += 1
     EXAMPLES["frames"] += len(msgs)
     assert s.listener_errors == 0
     assert s.received == len(msgs)
-    assert s.received == s.decoded + s.ignored + s.rejected_total, s
+    assert s.received == s.decoded + s.ignored + s.rejected_total + s.held, s
+    listener.settle()  # end of the frames: what is held is accepted or rejected
+    drained = listener.drain()
+    n_samples += len(drained)
+    bins += binner.add_many(drained)
+    s = listener.stats()
+    assert s.held == 0 and s.received == s.decoded + s.ignored + s.rejected_total, s
+    bins += binner.flush()
     assert s.samples == n_samples
     b = binner.stats()
     assert sum(x.n_drift + x.n_temp for x in bins) + b.late + b.jumps == n_samples

@@ -16,10 +16,11 @@ import can
 import pytest
 
 from gyrostand.can.binning import read_samples_csv
+from gyrostand.can.logread import LogDamage
 from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import read_log
 from gyrostand.core.data import Samples
-from gyrostand.errors import CanEdgeError, DataError
+from gyrostand.errors import DataError
 from gyrostand.report.series import read_estimates
 from gyrostand.workbench import read_ledger
 
@@ -58,7 +59,7 @@ def test_every_prefix_of_a_recorded_blf_reads_as_a_prefix_of_its_frames(tmp_path
     assert torn > 350 and plain_failures > 0  # python-can alone cannot read every cut
 
 
-def test_damage_inside_a_blf_is_still_an_error(tmp_path):
+def test_damage_inside_a_blf_is_skipped_counted_and_reading_goes_on(tmp_path, caplog):
     path = tmp_path / "raw.blf"
     with Recorder(path) as rec:
         rec._writer.max_container_size = 512
@@ -68,8 +69,11 @@ def test_damage_inside_a_blf_is_still_an_error(tmp_path):
     data = bytearray(path.read_bytes())
     data[400:404] = b"XXXX"  # an object signature in the middle
     path.write_bytes(bytes(data))
-    with pytest.raises(CanEdgeError, match="corrupt CAN log"):
-        list(read_log(path))
+    damage = LogDamage()
+    got = [m.timestamp for m in read_log(path, damage)]
+    assert damage.containers == 1 and "raw.blf: damaged container at byte" in caplog.text
+    assert 150 < len(got) < 200 and got[-1] == 1.7e9 + 199  # one container lost, no more
+    assert got == sorted(got) and set(got) <= {1.7e9 + i for i in range(200)}
 
 
 ROWS = ["t,drift,temp,n_drift,n_temp",

@@ -38,7 +38,7 @@ def test_lkf_section_values_and_defaults():
 
 @pytest.mark.parametrize("lkf, match", [
     ({"beta0": 0}, r"t\.yaml: gyros\[0\]\.lkf\.beta0: must be > 0"),
-    ({"sigma": -1}, r"gyros\[0\]\.lkf\.sigma: must be >= 0"),
+    ({"sigma": -1}, r"gyros\[0\]\.lkf\.sigma: must be > 0"),
     ({"gamma": 1}, r"gyros\[0\]\.lkf\.gamma: unknown key"),
     ({"held": {"random_walk.q": 1}}, r"gyros\[0\]\.lkf\.held\.random_walk\.q: expected"),
     ({"warmup": 5}, r"gyros\[0\]\.lkf\.warmup: must be in \[10, "),
