@@ -35,7 +35,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..errors import ModelError
-from .kalman import foh_weights, kf_run
+from .kalman import NO_WEIGHTS, foh_weights, kf_run
 from .lkf import _fixed_point
 from .lkf_kernel import gm_profile, lkf_pass
 from .model import Model
@@ -451,7 +451,7 @@ class RelinLKF:
             if single:  # markov + white: the scalar filter
                 g, slogf, nobs = gm_profile(d, phi[0], qq[0], r, p0[0])
             else:
-                G, slogf, nobs = kf_run(phi, qq, p0, r, D, False)[2:]
+                G, slogf, nobs = kf_run(phi, qq, p0, r, NO_WEIGHTS, D, False)[2:]
                 g = float(G[0, 0])
             out = (math.inf, 1.0)
             if np.isfinite(slogf) and nobs > 0:
