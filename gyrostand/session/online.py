@@ -32,7 +32,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from ..config import GyroConfig, LkfConfig
 from ..core.data import Samples
@@ -141,8 +141,10 @@ RELINEARIZE_S = 100.0
 
 @functools.lru_cache(maxsize=NIS_WINDOW + 1)
 def _nis_band(n: int) -> tuple[float, float]:
-    """Two-sided ``NIS_ALPHA`` band of the mean of ``n`` χ²(1) variables."""
-    return (float(chi2.ppf(NIS_ALPHA / 2, n)) / n, float(chi2.ppf(1 - NIS_ALPHA / 2, n)) / n)
+    """Two-sided ``NIS_ALPHA`` band of the mean of ``n`` χ²(1) variables: the χ²(n)
+    quantile is 2·P⁻¹(n/2, q), P⁻¹ the inverse regularized lower incomplete gamma."""
+    return (2 * float(gammaincinv(n / 2, NIS_ALPHA / 2)) / n,
+            2 * float(gammaincinv(n / 2, 1 - NIS_ALPHA / 2)) / n)
 
 
 @dataclass
