@@ -39,7 +39,7 @@ from typing import Any
 import yaml
 
 from gyrostand.can.dbc import MessageRef, SignalRef, find_message, find_signal, load_dbc
-from gyrostand.core.terms import VOCABULARY
+from gyrostand.core.names import VOCABULARY
 from gyrostand.errors import CanEdgeError, ConfigError
 
 __all__ = [

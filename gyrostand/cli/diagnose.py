@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..core.candidates import Report
-from ..workbench import run_diagnose
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
+
+if TYPE_CHECKING:
+    from ..core.candidates import Report
 
 
 def add_parser(sub: Any) -> None:
@@ -21,6 +22,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..workbench import run_diagnose
+
     subject = subject_of(args)
     rep = run_diagnose(subject)
     if args.json:

@@ -7,10 +7,7 @@ import json
 import sys
 from typing import Any
 
-from ..core.data import Samples
-from ..core.identify import IDENTIFIERS, identify
-from ..core.model import Model
-from ..core.terms import VOCABULARY
+from ..core.names import METHODS, VOCABULARY
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -22,7 +19,7 @@ def add_parser(sub: Any) -> None:
         description="Identify the drift model from a CSV with columns t (s), drift, temp.",
     )
     p.add_argument("samples", help="CSV with a header containing t, drift, temp")
-    p.add_argument("--method", choices=sorted(IDENTIFIERS), default="ml",
+    p.add_argument("--method", choices=sorted(METHODS), default="ml",
                    help="identifier: lsq (the paper's least squares), lkf (its linearized "
                         "Kalman filter), ml (exact maximum likelihood; default)")
     p.add_argument("--model", default=DEFAULT_MODEL,
@@ -57,6 +54,10 @@ def options_for(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..core.data import Samples
+    from ..core.identify import identify
+    from ..core.model import Model
+
     samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
     result = identify(samples, model, args.method, **options_for(args))

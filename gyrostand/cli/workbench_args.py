@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..workbench import Subject, open_subject
+if TYPE_CHECKING:
+    from ..workbench import Subject
 
 
 def add_subject_args(p: Any) -> None:
@@ -17,6 +18,8 @@ def add_subject_args(p: Any) -> None:
 
 
 def subject_of(args: argparse.Namespace) -> Subject:
+    from ..workbench import open_subject
+
     return open_subject(args.run, gyro=args.gyro, model=args.model)
 
 
