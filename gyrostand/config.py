@@ -39,7 +39,7 @@ from typing import Any
 import yaml
 
 from gyrostand.can.dbc import MessageRef, SignalRef, find_message, find_signal, load_dbc
-from gyrostand.core.terms import VOCABULARY
+from gyrostand.core.names import LKF_VARIANTS, VOCABULARY
 from gyrostand.errors import CanEdgeError, ConfigError
 
 __all__ = [
@@ -64,8 +64,6 @@ log = logging.getLogger(__name__)
 #: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
 MODEL_TERMS = VOCABULARY
 IDENTIFIERS = ("lkf", "lsq", "ml")
-#: the LKF's variants: the converging filter (default) and the paper's single pass
-LKF_VARIANTS = ("relin", "paper")
 
 #: Signals the daemon writes or reads in its own response/command messages.
 RESULT_SIGNALS = ("Kind", "Identifier", "Param", "Value", "Std", "NParams", "Counter")

@@ -10,12 +10,13 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..core.allan import AllanTable, allan_table, thermal_residual
-from ..core.ml import ml
-from ..core.terms import VOCABULARY
-from ..workbench import Subject, open_subject
+from ..core.names import VOCABULARY
+
+if TYPE_CHECKING:
+    from ..core.allan import AllanTable
+    from ..workbench import Subject
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +64,10 @@ def _drift_unit(subject: Subject) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..core.allan import allan_table, thermal_residual
+    from ..core.ml import ml
+    from ..workbench import open_subject
+
     subject = open_subject(args.run, gyro=args.gyro, model=args.model)
     unit = args.unit or _drift_unit(subject)
     s = subject.samples

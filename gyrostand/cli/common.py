@@ -7,11 +7,11 @@ import dataclasses
 import math
 from collections.abc import Callable
 from types import MappingProxyType
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from ..config import SessionConfig
-from ..session.final import result_table
-from ..session.pipeline import RunOutcome
+if TYPE_CHECKING:
+    from ..config import SessionConfig
+    from ..session.pipeline import RunOutcome
 
 #: the python-can command-line options (``can.logger``, ``can.player``, ``can.viewer``)
 #: and the ``can.Bus`` argument each one sets
@@ -55,6 +55,8 @@ def with_bus_overrides(cfg: SessionConfig, args: argparse.Namespace) -> SessionC
 def print_outcome(outcome: RunOutcome, out: TextIO,
                   truths: dict[str, dict[str, float]] | None = None) -> None:
     """The final table of every gyro, the counts, and the paths."""
+    from ..session.final import result_table
+
     dec = outcome.stats.get("decoder", {})
     print(f"stopped: {outcome.stop_reason} (state {outcome.state}); frames "
           f"{dec.get('received', 0)} received, {dec.get('decoded', 0)} decoded, "

@@ -13,11 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..config import load_config
 from ..errors import ConfigError
-from ..session.live import run_live
-from ..session.offline import simulated_frames, truth_params
-from ..session.stand import SimulatedStand
 from .common import add_bus_args, print_outcome, with_bus_overrides
 
 #: where the demo config lives: the repository next to the package, else the cwd
@@ -45,6 +41,11 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import load_config
+    from ..session.live import run_live
+    from ..session.offline import simulated_frames, truth_params
+    from ..session.stand import SimulatedStand
+
     cfg = with_bus_overrides(load_config(args.config or find_demo_config()), args)
     sim = cfg.simulate
     if sim is None:

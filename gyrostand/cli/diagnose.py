@@ -5,12 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..core.candidates import Report
-from ..core.prederror import ModelError
-from ..workbench import run_diagnose
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
+
+if TYPE_CHECKING:
+    from ..core.candidates import Report
+    from ..core.prederror import ModelError
 
 
 def add_parser(sub: Any) -> None:
@@ -22,6 +23,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..workbench import run_diagnose
+
     subject = subject_of(args)
     rep = run_diagnose(subject)
     if args.json:

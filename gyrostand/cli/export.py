@@ -8,7 +8,6 @@ import argparse
 from typing import Any
 
 from ..errors import ConfigError
-from ..session.export import export_mf4, export_parquet
 
 
 def add_parser(sub: Any) -> None:
@@ -26,6 +25,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..session.export import export_mf4, export_parquet
+
     if not (args.parquet or args.mf4):
         raise ConfigError("export: choose a format: --parquet and/or --mf4")
     written = []

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..core.terms import VOCABULARY
-from ..workbench import FitStep, run_fit
+from ..core.names import VOCABULARY
 from .workbench_args import add_subject_args, fmt_estimate, subject_of
+
+if TYPE_CHECKING:
+    from ..workbench import FitStep
 
 
 def add_parser(sub: Any) -> None:
@@ -25,6 +27,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..workbench import run_fit
+
     subject = subject_of(args)
     step = run_fit(subject, args.add, args.remove)
     if args.json:

@@ -8,11 +8,7 @@ import json
 import sys
 from typing import Any
 
-from ..core.data import Samples
-from ..core.identify import IDENTIFIERS, identify
-from ..core.lkf import VARIANTS
-from ..core.model import Model
-from ..core.terms import VOCABULARY
+from ..core.names import LKF_VARIANTS, METHODS, VOCABULARY
 from ..errors import ConfigError
 from .common import number
 
@@ -26,7 +22,7 @@ def add_parser(sub: Any) -> None:
         description="Identify the drift model from a CSV with columns t (s), drift, temp.",
     )
     p.add_argument("samples", help="CSV with a header containing t, drift, temp")
-    p.add_argument("--method", choices=sorted(IDENTIFIERS), default="ml",
+    p.add_argument("--method", choices=sorted(METHODS), default="ml",
                    help="identifier: lsq (the paper's least squares), lkf (its linearized "
                         "Kalman filter), ml (exact maximum likelihood; default)")
     p.add_argument("--model", default=DEFAULT_MODEL,
@@ -40,7 +36,7 @@ def add_parser(sub: Any) -> None:
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
                    help="lsq regressor Y_{k-1} (standard, default) or Y_k (the paper's text)")
     g = p.add_argument_group("lkf options")
-    g.add_argument("--variant", choices=VARIANTS, default="relin",
+    g.add_argument("--variant", choices=LKF_VARIANTS, default="relin",
                    help="relin (default): the converging filter run to its fixed point "
                         "(re-linearised, noise levels re-estimated); paper: the paper's "
                         "single pass at a fixed point (warns when it stays there or β <= 0)")
@@ -69,6 +65,10 @@ def options_for(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..core.data import Samples
+    from ..core.identify import identify
+    from ..core.model import Model
+
     samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
     if args.method == "lkf" and args.beta0 is not None and args.beta0 * samples.dt >= 1.0:

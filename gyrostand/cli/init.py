@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..can.survey import Survey, unit_kind
-from ..config import load_config
 from ..errors import ConfigError
-from ..session.scaffold import scaffold, write_scaffold
 from .common import add_bus_args, bus_overrides
+
+if TYPE_CHECKING:
+    from ..can.survey import Survey
 
 
 def _int(text: str) -> int:
@@ -43,6 +43,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import load_config
+    from ..session.scaffold import scaffold, write_scaffold
+
     bus = bus_overrides(args)
     if bus and "interface" not in bus:
         raise ConfigError("init: give -i/--interface with -c/-b/--fd (or none of them: "
@@ -61,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
 
 def render_survey(sv: Survey, name: str) -> str:
     """The DBC's messages and signals, with the proposed roles marked."""
+    from ..can.survey import unit_kind
+
     role: dict[tuple[str, str], str] = {}
     for g in sv.gyros:
         role[(g.drift.message, g.drift.signal)] = f"<- drift of {g.name}"

@@ -9,10 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..config import load_config
 from ..errors import CanEdgeError
-from ..session.offline import run_replay
-from ..session.outputs import raw_segments
 from .common import number, print_outcome
 
 
@@ -39,6 +36,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import load_config
+    from ..session.offline import run_replay
+    from ..session.outputs import raw_segments
+
     cfg = load_config(args.config)
     logs: list[Path] = []
     for item in args.log:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..config import SessionConfig, load_config
-from ..session.live import run_live
 from .common import add_bus_args, number, print_outcome, with_bus_overrides
+
+if TYPE_CHECKING:
+    from ..config import SessionConfig
 
 
 def add_parser(sub: Any) -> None:
@@ -42,6 +43,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import load_config
+    from ..session.live import run_live
+
     cfg = with_bus_overrides(load_config(args.config), args)
     if args.check:
         print(describe_session(cfg))

@@ -10,11 +10,7 @@ import argparse
 import logging
 from typing import Any
 
-from ..can.bus import open_bus
-from ..can.framesim import send_frames, write_log
-from ..config import load_config
 from ..errors import ConfigError
-from ..session.offline import simulated_frames
 from .common import add_bus_args, number, with_bus_overrides
 
 log = logging.getLogger(__name__)
@@ -45,6 +41,11 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..can.bus import open_bus
+    from ..can.framesim import send_frames, write_log
+    from ..config import load_config
+    from ..session.offline import simulated_frames
+
     cfg = load_config(args.config)
     if cfg.simulate is None:
         raise ConfigError(f"{args.config}: simulate: missing (the simulator needs it)")

@@ -6,10 +6,12 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import DataError
-from ..workbench import Subject, open_subject
+
+if TYPE_CHECKING:
+    from ..workbench import Subject
 
 
 def add_subject_args(p: Any) -> None:
@@ -26,6 +28,8 @@ def add_subject_args(p: Any) -> None:
 
 
 def subject_of(args: argparse.Namespace) -> Subject:
+    from ..workbench import open_subject
+
     check_run_folder(Path(args.run))
     return open_subject(args.run, gyro=args.gyro, model=args.model,
                         unit=getattr(args, "unit", None), dt=getattr(args, "dt", None))

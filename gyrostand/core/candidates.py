@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from ..errors import DataError, GyrostandError
 from .data import Samples
@@ -212,6 +211,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
                     terms: list[str] | None = None) -> list[Candidate]:
     """Refit ``model + c`` for each candidate ``c``; ranked best first (ΔBIC, then p)."""
+    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
+
     n = base.n_observed
     out = []
     for term in terms if terms is not None else candidate_terms(model):
@@ -308,6 +309,8 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     the model while s still is once d is in (then s is the real one). Either way the table
     says they compete; the other is tested again after the first is added.
     """
+    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
+
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     det = [c for c in sig if not c.stochastic]
     sto = [c for c in sig if c.stochastic]

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from .data import Samples
 from .kalman import kf_run, kf_smooth
@@ -39,6 +38,8 @@ def ljung_box(z: np.ndarray, lags: int) -> tuple[float, float]:
 
     Q = n(n+2) Σ_{k=1..h} ρ_k² / (n − k),  Q ~ χ²(h) for white noise.
     """
+    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
+
     z = z[np.isfinite(z)]
     n = z.size
     z = z - z.mean()
@@ -190,6 +191,8 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
         lags = int(min(max(10, np.log(max(n, 2))), max(1, n // 5)))
     q, pval = ljung_box(z, lags)
     nis = float(np.nanmean(z * z))
+    from scipy.stats import chi2
+
     band = (float(chi2.ppf(0.025, n) / n), float(chi2.ppf(0.975, n) / n))
     # smoothed residuals: y − deterministic part − smoothed stochastic part
     X = model.regressors(p, ctx)

@@ -36,6 +36,7 @@ from ..errors import GyrostandError, ModelError
 from .data import Samples
 from .kalman import foh_weights, kf_step
 from .model import Model, context
+from .names import LKF_VARIANTS
 from .results import Estimate, FitResult
 from .terms import HYSTERESIS_RATE, T_REF, TERMS
 from .validate import prepare, require_samples
@@ -299,7 +300,7 @@ def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> t
 
 
 #: the LKF's variants: the converging filter and the paper's single pass
-VARIANTS = ("relin", "paper")
+VARIANTS = LKF_VARIANTS
 #: relin batch: re-linearisations (each a noise re-estimate and passes to a fixed point)
 #: until the point moves less than this many stds and the noise levels by < 1e-4 relative
 BATCH_SETTLE_SIGMA = 1e-2

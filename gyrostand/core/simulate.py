@@ -9,7 +9,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .data import Samples
 from .model import Model, context
@@ -54,6 +53,8 @@ def simulate(
     y = X @ theta if theta.size else np.zeros_like(t)
     phi, q, p0, r = model.stochastic(params, dt)
     N = t.size
+    from scipy.signal import lfilter  # here: scipy.signal imports scipy.stats (0.5 s)
+
     for i in range(phi.size):
         # x_0 ~ N(0, p0), x_k = phi x_{k-1} + w_k, w_k ~ N(0, q)
         w = rng.standard_normal(N) * np.sqrt(q[i])

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from .kalman import first_order_response, foh_weights
+from .names import VOCABULARY as VOCABULARY  # re-exported; defined in names.py
 
 P = Mapping[str, float]
 
@@ -93,6 +93,8 @@ class Context:
             if w < 5:
                 rate = np.gradient(self.temp, self.dt) if n > 1 else np.zeros(n)
             else:
+                from scipy.signal import savgol_filter  # scipy.signal imports scipy.stats
+
                 rate = savgol_filter(self.temp, w, 2, deriv=1, delta=self.dt, mode="interp")
             self._cache["rate"] = rate
         return self._cache["rate"]
@@ -287,12 +289,6 @@ class Warmup(Term):
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("A"): np.exp(-(ctx.t - ctx.t[0]) / p[self.key("tau")])}
 
-
-#: the vocabulary of PRODUCT.md, in its order (the contract)
-VOCABULARY: tuple[str, ...] = (
-    "markov", "temp", "white", "bias", "temp2", "temp_lag", "temp_rate", "hysteresis",
-    "trend", "warmup", "random_walk", "markov2",
-)
 
 TERMS: dict[str, type[Term]] = {
     cls.name: cls for cls in (Markov, Temp, White, Bias, Temp2, TempLag, TempRate, Hysteresis,

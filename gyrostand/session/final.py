@@ -81,12 +81,15 @@ class GyroFinal:
 def samples_of(cols: Mapping[str, Sequence[float]], dt: float,
                source: str) -> tuple[Samples, float]:
     """A gyro's ``samples.csv`` columns as :class:`Samples` with time from its first bin
-    (s); returns the first bin's start time ``t0`` (s) too."""
+    (s), each bin's measurement noise weighted by its frame count ``n_drift``; returns the
+    first bin's start time ``t0`` (s) too."""
     t = np.asarray(cols["t"], dtype=float)
     t0 = float(t[0])
     rel = np.round((t - t0) / dt) * dt
+    counts = np.asarray(cols["n_drift"], dtype=float) if "n_drift" in cols else None
     s = Samples.from_arrays(rel, np.asarray(cols["drift"], dtype=float),
-                            np.asarray(cols["temp"], dtype=float), dt=dt, source=source)
+                            np.asarray(cols["temp"], dtype=float), dt=dt, source=source,
+                            counts=counts)
     return s, t0
 
 

@@ -1,0 +1,114 @@
+"""Start-up: the command line imports what a command uses, when it uses it.
+
+Each check runs in a fresh interpreter (a subprocess) and looks at ``sys.modules`` there:
+building the argument parser and printing every help page must not import the numerical
+core's heavy dependencies, and ``identify`` must not import those it does not use.
+"""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from gyrostand.core.identify import IDENTIFIERS
+from gyrostand.core.model import Model
+from gyrostand.core.names import METHODS, VOCABULARY
+from gyrostand.core.profiles import paper_profile
+from gyrostand.core.simulate import simulate
+from gyrostand.core.terms import TERMS
+
+from .conftest import truth
+
+#: what none of the help pages needs (numba: 0.15 s, scipy.stats: 0.5 s, cantools + can:
+#: 0.9 s with asammdf, matplotlib: 0.3 s, on the 2-core test machine)
+HEAVY = ("numpy", "scipy", "scipy.stats", "scipy.signal", "numba", "matplotlib", "cantools",
+         "can", "yaml", "gyrostand.config", "gyrostand.session")
+
+REPORT = ("import json, sys\n"
+          "print(json.dumps(sorted(m for m in sys.modules if m in {heavy!r})))\n")
+
+
+def loaded_after(code: str, heavy: tuple[str, ...] = HEAVY) -> list[str]:
+    """The modules of ``heavy`` imported by ``code`` in a fresh interpreter."""
+    out = subprocess.run([sys.executable, "-c", code + "\n" + REPORT.format(heavy=set(heavy))],
+                         capture_output=True, text=True, timeout=300, check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_building_the_parser_and_every_help_page_imports_nothing_heavy():
+    code = ("import contextlib, io\n"
+            "from gyrostand.cli import build_parser, main\n"
+            "parser = build_parser()\n"
+            "sub = next(a for a in parser._actions if a.dest == 'command')\n"
+            "for argv in [['--help']] + [[name, '--help'] for name in sub.choices]:\n"
+            "    with contextlib.redirect_stdout(io.StringIO()) as f:\n"
+            "        try:\n"
+            "            main(argv)\n"
+            "        except SystemExit as e:\n"
+            "            assert e.code == 0, argv\n"
+            "    assert 'usage: gyrostand' in f.getvalue(), argv\n"
+            "assert len(sub.choices) >= 11, sorted(sub.choices)\n")
+    assert loaded_after(code) == []
+
+
+def test_gyrostand_help_as_a_process_imports_nothing_heavy():
+    code = ("import runpy, sys\n"
+            "sys.argv = ['gyrostand', '--help']\n"
+            "try:\n"
+            "    runpy.run_module('gyrostand', run_name='__main__')\n"
+            "except SystemExit as e:\n"
+            "    assert e.code == 0\n")
+    assert loaded_after(code) == []
+
+
+def test_importing_the_core_package_is_lazy():
+    assert loaded_after("import gyrostand.core, gyrostand.core.names") == []
+
+
+@pytest.fixture(scope="module")
+def csv_path(tmp_path_factory):
+    m = Model.parse("markov,temp,bias")
+    s = simulate(m, truth("C1", sigma_v=0.01, **{"bias.b": 0.3}), paper_profile(), seed=52)
+    p = tmp_path_factory.mktemp("startup") / "samples.csv"
+    s.to_csv(p)
+    return p
+
+
+def test_identify_ml_imports_neither_scipy_stats_nor_can_nor_matplotlib(csv_path):
+    code = ("import contextlib, io, json\n"
+            "from gyrostand.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as f:\n"
+            f"    assert main(['identify', {str(csv_path)!r}, '--method', 'ml', '--json']) == 0\n"
+            "assert json.loads(f.getvalue())['method'] == 'ml'\n")
+    heavy = ("scipy.stats", "scipy.signal", "matplotlib", "cantools", "can",
+             "gyrostand.config", "gyrostand.session", "numba")  # (numba imports yaml)
+    assert loaded_after(code, heavy) == ["numba"]  # numba: the Kalman filter of the fit
+
+
+def test_the_core_package_exports_what_it_did():
+    """``from gyrostand.core import X`` gives the same objects as the submodules, also for
+    the functions named like their submodule, whichever is imported first."""
+    code = ("import gyrostand.core.ml, gyrostand.core.identify, gyrostand.core.simulate\n"
+            "import gyrostand.core as core\n"
+            "from gyrostand.core import identify, lkf, lsq, ml, simulate\n"
+            "import types\n"
+            "for f in (identify, lkf, lsq, ml, simulate):\n"
+            "    assert isinstance(f, types.FunctionType), f\n"
+            "import importlib\n"
+            "for name in core.__all__:\n"
+            "    src = importlib.import_module('gyrostand.core.' + core._SOURCES[name])\n"
+            "    assert getattr(core, name) is getattr(src, name), name\n"
+            "assert set(core.__all__) <= set(dir(core))\n"
+            "try:\n"
+            "    core.no_such_name\n"
+            "except AttributeError as e:\n"
+            "    assert 'no_such_name' in str(e)\n"
+            "else:\n"
+            "    raise AssertionError('no AttributeError')\n")
+    assert "numba" in loaded_after(code)  # every export was imported
+
+
+def test_the_light_names_are_the_core_s_names():
+    assert VOCABULARY == tuple(TERMS)  # same names, same (PRODUCT.md) order
+    assert sorted(METHODS) == sorted(IDENTIFIERS)
