@@ -37,7 +37,7 @@ from ..config import GyroConfig, SessionConfig
 from ..core.data import Samples
 from ..core.identify import identify
 from ..core.model import Model
-from ..core.results import UNIT_TEXT, FitResult
+from ..core.results import FitResult, unit_text
 from ..errors import GyrostandError
 from .online import LkfPoint, OnlineEstimate, resolve_lkf_point
 from .outputs import write_atomic
@@ -65,6 +65,8 @@ class GyroFinal:
     observed: int
     fits: dict[str, FitResult | str] = field(default_factory=dict)
     online: list[OnlineEstimate] = field(default_factory=list)
+    #: the drift's unit (the DBC signal's), printed in place of the model's ``y``
+    unit: str = "y"
 
     def to_dict(self) -> dict[str, Any]:
         fits = {m: (f.to_dict() if isinstance(f, FitResult) else {"error": f})
@@ -108,7 +110,8 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
     n = len(cols["t"])
     gaps = sum(1 for a, b in zip(cols["n_drift"], cols["n_temp"], strict=True)
                if a == 0 or b == 0)
-    out = GyroFinal(gyro.name, model, math.nan, n, gaps, 0, online=list(online))
+    out = GyroFinal(gyro.name, model, math.nan, n, gaps, 0, online=list(online),
+                    unit=gyro.drift.signal.unit or "y")
     if not n:
         for m in final_methods(gyro):
             out.fits[m] = "no bins were recorded for this gyro"
@@ -207,7 +210,7 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
             f = final.fits[m]
             if isinstance(f, FitResult) and name in f.parameters:
                 e = f.parameters[name]
-                unit = UNIT_TEXT.get(e.unit, e.unit)
+                unit = unit_text(e.unit, final.unit)
                 cell = f"{e.value:.5g} (held)" if e.fixed else f"{e.value:.5g} ± {e.std:.2g}"
             else:
                 cell = "—"

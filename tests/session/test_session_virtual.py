@@ -81,6 +81,9 @@ def test_heartbeat_counts_and_files(live):
     assert est[-1].endswith(",ok") and "nan" not in est[-1]
     report = outcome.report.read_text()
     assert "markov.beta" in report and "ml" in report and "frames received" in report
+    # units from the DBC's drift signal (deg/h), not the model's placeholder y
+    gamma_row = next(ln for ln in report.splitlines() if ln.startswith("temp.gamma"))
+    assert gamma_row.endswith("(deg/h)/(s·°C)"), gamma_row
     doc = json.loads(outcome.result_json.read_text())
     g = doc["gyros"]["az"]
     assert set(g["fits"]) == {"lkf", "lkf_batch", "lsq", "ml"} and g["bins"] == 2001
