@@ -281,7 +281,7 @@ class DecodingListener(can.Listener):
         accepted frame) and at or after its id's previous frame, and it is accepted at
         once; anything else goes through :meth:`_timed`, which holds or rejects it."""
         n, rej, routes, buf = self._n, self._rej, self._routes, self._buf
-        cap = self.capacity
+        cap, last_counter = self.capacity, self._last_counter
         window, offset, a, held = self.window, self._offset, self._anchor, bool(self._held)
         it = iter(frames)
         while True:
@@ -334,10 +334,14 @@ class DecodingListener(can.Listener):
                             route.last_t = t
                             if t > a:
                                 a = t
-                            if cname is not None:
+                            if cname is not None:  # _count, inlined on the fast path
                                 cv = values.get(cname)
                                 if cv is not None:
-                                    self._count(ckey, int(cv), mod)
+                                    cv = int(cv)
+                                    prev = last_counter.get(ckey)
+                                    if prev is not None and (cv - prev) % mod != 1 % mod:
+                                        n[5] += 1
+                                    last_counter[ckey] = cv
                             buf.append((g, c, t + offset, v))
                             n[1] += 1
                             n[3] += 1
