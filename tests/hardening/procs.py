@@ -109,12 +109,27 @@ class Daemon:
         self.lines: queue.Queue[str] = queue.Queue()
         self.out: list[str] = []
         self.err = ""
+        # stderr drained as it comes: an undrained pipe (64 KiB) would block the daemon
+        self._err: list[str] = []
+        self._err_reader = threading.Thread(target=self._read_err, daemon=True)
+        self._err_reader.start()
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
             self.lines.put(line.rstrip("\n"))
+
+    def _read_err(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self._err.append(line)
+
+    def stderr_text(self, wait: float = 2.0) -> str:
+        """What the daemon wrote to stderr (all of it once the process has ended)."""
+        if self.proc.poll() is not None:
+            self._err_reader.join(wait)
+        return "".join(self._err)
 
     def wait_for(self, prefix: str, timeout: float = 60.0) -> str:
         deadline = time.monotonic() + timeout
@@ -128,9 +143,8 @@ class Daemon:
             self.out.append(line)
             if line.startswith(prefix):
                 return line
-        assert self.proc.stderr is not None
-        err = self.proc.stderr.read() if self.proc.poll() is not None else ""
-        raise AssertionError(f"no {prefix!r} line; stdout {self.out}, stderr {err}")
+        raise AssertionError(f"no {prefix!r} line; stdout {self.out}, "
+                             f"stderr {self.stderr_text()}")
 
     def run_dir(self, ready: str) -> Path:
         return Path(ready.split(": ", 1)[1])
@@ -158,13 +172,18 @@ class Daemon:
         try:
             rc = self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
+            # the daemon hangs: its threads' stacks (faulthandler on SIGUSR1), then kill
+            os.kill(self.proc.pid, signal.SIGUSR1)
+            time.sleep(1.0)
             self.proc.kill()
-            raise
+            self.proc.wait(10)
+            raise AssertionError(f"the daemon did not exit within {timeout} s; stdout "
+                                 f"{self.out[-20:]}; stderr (with every thread's stack):\n"
+                                 f"{self.stderr_text()[-12000:]}") from None
         time.sleep(0.05)
         while not self.lines.empty():
             self.out.append(self.lines.get())
-        assert self.proc.stderr is not None
-        self.err = self.proc.stderr.read()
+        self.err = self.stderr_text()
         return rc, self.err
 
     def close(self) -> None:
