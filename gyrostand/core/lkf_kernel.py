@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .kalman import _joseph_finish
+
 
 @njit(cache=True, nogil=True)
 def lkf_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback,
@@ -149,14 +151,7 @@ def lkf_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback,
             for j in range(n):
                 s += AP[i, j] * H[j]
             PH[i] = s
-        for i in range(n):
-            for j in range(n):
-                P[i, j] = AP[i, j] - PH[i] * K[j] + K[i] * r * K[j]
-        for i in range(n):
-            for j in range(i + 1, n):
-                s = 0.5 * (P[i, j] + P[j, i])
-                P[i, j] = s
-                P[j, i] = s
+        _joseph_finish(P, AP, PH, K, r)  # PH now holds (I − K H) P H'
     st[0] = eps0
     return s_nis, s_logf, nobs
 
