@@ -61,6 +61,16 @@ SUPPORTED = {"markov", "temp", "temp2", "bias", "temp_rate", "hysteresis", "tren
 ONLINE_RATE_WINDOW = 61
 
 
+def causal_rate(temps: list[float], dt: float) -> float:
+    """dT/dt (degC/s): least-squares slope of the temperatures of the last samples
+    (the online filters keep ``ONLINE_RATE_WINDOW`` of them); 0 for fewer than 3."""
+    n = len(temps)
+    if n < 3:
+        return 0.0
+    x = np.arange(n) - (n - 1) / 2
+    return float(x @ np.asarray(temps) / (x @ x) / dt)
+
+
 def lkf_layout(model: Model) -> list[str]:
     """Names of the LKF's states, in order."""
     if "markov" not in model:
@@ -206,12 +216,7 @@ class OnlineLKF:
         return rate if key == "temp_rate.k" else math.tanh(rate / HYSTERESIS_RATE)
 
     def _causal_rate(self) -> float:
-        """dT/dt (degC/s): least-squares slope of the last ``ONLINE_RATE_WINDOW`` samples."""
-        n = len(self._Tbuf)
-        if n < 3:
-            return 0.0
-        x = np.arange(n) - (n - 1) / 2
-        return float(x @ np.asarray(self._Tbuf) / (x @ x) / self.dt)
+        return causal_rate(self._Tbuf, self.dt)
 
     def update(self, y: float, T: float,
                regressors: Mapping[str, float] | None = None) -> tuple[float, float]:

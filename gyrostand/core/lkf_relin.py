@@ -36,10 +36,10 @@ from scipy.optimize import minimize_scalar
 
 from ..errors import ModelError
 from .kalman import NO_WEIGHTS, foh_weights, kf_run
-from .lkf import _fixed_point
+from .lkf import _fixed_point, causal_rate
 from .lkf_kernel import gm_profile, lkf_pass
 from .model import Model
-from .terms import T_REF, TERMS, Context
+from .terms import HYSTERESIS_RATE, T_REF, TERMS, Context
 
 log = logging.getLogger(__name__)
 
@@ -274,16 +274,11 @@ class RelinLKF:
             else:
                 if math.isnan(rate):
                     rate = self._causal_rate()
-                out[j] = rate if key == "temp_rate.k" else math.tanh(rate / 1e-3)
+                out[j] = rate if key == "temp_rate.k" else math.tanh(rate / HYSTERESIS_RATE)
         return out
 
     def _causal_rate(self) -> float:
-        """dT/dt (degC/s): least-squares slope of the last 61 bins' temperature."""
-        n = len(self._Tbuf)
-        if n < 3:
-            return 0.0
-        x = np.arange(n) - (n - 1) / 2
-        return float(x @ np.asarray(self._Tbuf) / (x @ x) / self.dt)
+        return causal_rate(self._Tbuf, self.dt)
 
     def _context(self) -> Context:
         n = self.n
