@@ -125,11 +125,11 @@ class _Problem:
         """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
         the innovations, Σ ln f, and the number of observed samples."""
         X = self.model.regressors(p, self.ctx)
-        phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
+        ss = self.model.state_space(p, self.samples.dt)
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
         Y[:, 1:] = X
-        _, _, G, slogf, n = kf_run(phi, q, p0, r, self.weights, Y, False)
+        _, _, G, slogf, n = kf_run(ss.phi, ss.q, ss.p0, ss.r, self.weights, Y, False)
         return G, slogf, n
 
     def profile(self, z: np.ndarray):
@@ -191,29 +191,22 @@ class _Problem:
         return p, A / s2, ll
 
 
-def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
-    """Candidate start points: LSQ-seeded β and a few noise ratios per free parameter."""
+def _start_grid(prob: _Problem, seeds: Mapping[str, float | None]) -> list[np.ndarray]:
+    """Candidate start points: each term's start values of its searched parameters
+    (:meth:`~gyrostand.core.term_base.Term.start_values`; noise levels as ratios), and
+    around each seed value (least squares' β) a factor 3 either way."""
     axes = []
     dur, dt = prob.duration, prob.samples.dt
+    model = prob.model
+    params = dict(model.params)
     for n in prob.rates:
-        if n == "markov.beta":
-            # least squares' β seeds the grid, but with measurement noise it is biased by
-            # orders of magnitude (errors in variables): a wide geometric axis as well
-            vals = list(np.geomspace(2.0 / dur, 0.5 / dt, 5))
-            if beta0 is not None:
-                vals += [beta0, beta0 * 3, beta0 / 3]
-        elif prob.model.kind(n) == "time":
-            vals = list(np.geomspace(10 * dt, dur / 3, 4))
-        else:
-            vals = list(np.geomspace(3.0 / dur, 0.3 / dt, 4))
+        vals = model.term_of(n).start_values(params[n], dur, dt)
+        seed = seeds.get(n)
+        if seed is not None:
+            vals += [seed, seed * 3, seed / 3]
         axes.append([np.log(v) for v in vals])
     for n in prob.stds:
-        if n == "white.sigma":
-            rel = [1e-3, 0.03, 0.3, 1.0]
-        elif n == "random_walk.q":
-            rel = [0.03 / np.sqrt(dur), 0.3 / np.sqrt(dur), 3 / np.sqrt(dur)]
-        else:
-            rel = [0.3, 3.0]
+        rel = model.term_of(n).start_values(params[n], dur, dt)
         axes.append([np.log(v * prob.ref_scale) for v in rel])
     pts = [np.array(c) for c in itertools.product(*axes)]
     if len(pts) > 150:
@@ -225,12 +218,12 @@ def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
 
 
 def _lsq_beta(samples: Samples, model: Model) -> float | None:
-    """β from least squares on the single-process part of the model (a start value)."""
-    from .lsq import lsq
+    """β from least squares on the part of the model it represents (a start value)."""
+    from .lsq import SUPPORTED, lsq
 
     if "markov" not in model:
         return None
-    base = Model.parse([n for n in model.names if n in ("markov", "temp", "bias")])
+    base = Model.parse([n for n in model.names if n in SUPPORTED and n != "white"])
     try:
         b = lsq(samples, base).value("markov.beta")
     except Exception:  # noqa: BLE001 - a start value only; ML goes on with its grid
@@ -339,7 +332,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         ll, _ = prob.profile(z)
         return -ll / prob.n_obs if np.isfinite(ll) else 1e10
 
-    starts = _start_grid(prob, _lsq_beta(samples, model))
+    starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
     if start:
         # a previous fit's values; parameters it lacks start mid-grid
         z0 = []
