@@ -78,14 +78,17 @@ class Context:
                                     float(u[0]) / beta)
 
     def effective_temp(self, p: P) -> np.ndarray:
-        """The temperature that drives the drift: T, or T lagged by ``temp_lag.tau``.
+        """The temperature that drives the drift: T, changed by every ``modifier`` term
+        whose parameters ``p`` holds (:meth:`Term.modify_temperature`; ``temp_lag``: T
+        lagged by τ)."""
+        from .terms import TERMS  # the registry (terms.py builds on this module)
 
-        dT_L/dt = (T − T_L)/τ, T_L(0) = T(0).
-        """
-        tau = p.get("temp_lag.tau")
-        if tau is None:
-            return self.temp
-        return self.through_markov(self.temp / tau, 1.0 / tau)
+        T = self.temp
+        for cls in TERMS.values():
+            if cls.role == "modifier" and cls.params and all(
+                    f"{cls.name}.{q.name}" in p for q in cls.params):
+                T = cls().modify_temperature(p, self, T)
+        return T
 
     @property
     def temp_rate(self) -> np.ndarray:
@@ -204,6 +207,11 @@ class Term:
 
     def measurement_var(self, p: P) -> float:
         return 0.0
+
+    def modify_temperature(self, p: P, ctx: Context, T: np.ndarray) -> np.ndarray:
+        """A ``modifier`` term's change of the temperature that drives the drift's inputs."""
+        raise ModelError(f"term {self.name!r} (role {self.role}) does not modify the "
+                         "temperature")
 
     # ---- online: the linearised Kalman filter -------------------------------------------
     def input(self, T):

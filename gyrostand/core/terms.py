@@ -201,6 +201,11 @@ class TempLag(Term):
     null = "nuisance"  # τ is not identified when the lag has no effect
     signature_needs = ("markov.beta",)
 
+    def modify_temperature(self, p: P, ctx: Context, T: np.ndarray) -> np.ndarray:
+        # dT_L/dt = (T − T_L)/τ, T_L(0) = T(0)
+        tau = p[self.key("tau")]
+        return ctx.through_markov(T / tau, 1.0 / tau)
+
     def signature(self, p: P, ctx: Context) -> np.ndarray:
         # the change a small lag makes: −τ · (response to dT/dt)
         return -ctx.through_markov(ctx.temp_rate, p["markov.beta"])
