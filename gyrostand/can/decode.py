@@ -2,7 +2,9 @@
 decoded samples to one bounded FIFO, counting everything it rejects by reason.
 
 Per frame the work is constant: one dict lookup by frame id (standard and extended ids are
-different keys), a length check, one ``Message.decode(decode_choices=False)``, a range and
+different keys), a length check, one decode of the mapped signals (a precompiled
+extractor, :mod:`gyrostand.can.extract`, whatever the DBC's byte order and widths;
+cantools for multiplexed signals and commands), a range and
 timestamp check per mapped signal, and an append. Estimation, binning and I/O happen in the
 consumer (:meth:`DecodingListener.drain`), never in the Notifier's thread.
 
@@ -26,6 +28,7 @@ import can
 from cantools.database.can import Database
 
 from gyrostand.can.dbc import MessageRef, SignalRef, frame_key
+from gyrostand.can.extract import extractor
 from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
 
 try:
@@ -223,8 +226,13 @@ class DecodingListener(can.Listener):
                     mod = int(cnt.maximum) + 1
                 route.extract.append((g, c, ref.name, lo, hi,
                                       cnt.name if cnt else None, mod, (g, c)))
-        if command is not None:
-            self._route(db, command).is_command = True
+        for route in self._routes.values():  # the mapped signals only, layout-blind
+            needed = [x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+            route.decode = extractor(route.message, needed) or route.decode
+        if command is not None:  # a command is read whole, by cantools
+            route = self._route(db, command)
+            route.is_command = True
+            route.decode = _decoder(route.message)
         self.reset_counters()
 
     def _route(self, db: Database, ref: MessageRef) -> _Route:
