@@ -12,10 +12,23 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import allan, demo, diagnose, export, fit, identify, init, replay, report, run, simulate
+from . import (
+    allan,
+    demo,
+    design,
+    diagnose,
+    export,
+    fit,
+    identify,
+    init,
+    replay,
+    report,
+    run,
+    simulate,
+)
 
 SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export)
+               export, design)
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 
