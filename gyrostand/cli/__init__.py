@@ -106,6 +106,9 @@ def _main(argv: Sequence[str] | None = None) -> int:
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level
         h.setLevel(level)
     try:
+        from ..plugins import load_entry_points
+
+        load_entry_points()  # user terms (entry points gyrostand.terms) before any model
         return int(args.func(args) or 0)
     except GyrostandError as exc:
         if args.debug:
