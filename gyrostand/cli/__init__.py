@@ -127,8 +127,6 @@ def _main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    finally:  # main() called in-process (tests, scripts) leaves the library quiet again
-        progress.configure(on=False)
 
 
 if __name__ == "__main__":  # pragma: no cover
