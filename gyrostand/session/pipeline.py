@@ -47,7 +47,7 @@ from typing import Any, Protocol
 import can
 
 from ..can.binning import Bin, Binner, SamplesWriter, read_samples_csv
-from ..can.bus import COMMANDS, FrameEncoder
+from ..can.bus import FrameEncoder
 from ..can.decode import MALFORMED, REASONS, ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
@@ -395,7 +395,7 @@ class Pipeline:
             self._ack(c, q, False, "malformed")
             return
         code, seq = c, q
-        name = COMMANDS.get(code)
+        name = self.encoder.command_name(self.cfg.responses.command, code)
         log.info("command %s (seq %d) at t=%.3f", name or code, seq, t)
         if name is None:
             self.commands["unknown"] += 1
