@@ -79,6 +79,17 @@ def _gather_globals(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; progress output is on for its duration only (an in-process call,
+    e.g. from a test or a script, leaves the library silent afterwards)."""
+    from .. import progress
+
+    try:
+        return _main(argv)
+    finally:
+        progress.configure(on=False)
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _gather_globals(args)
