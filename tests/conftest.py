@@ -31,14 +31,3 @@ def c1_samples(base_model):
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
-
-
-@pytest.fixture(autouse=True)
-def _progress_off_after_each_test():
-    """``cli.main`` turns progress output on for the process (as a command should); a test
-    that calls it in-process would leave it on for every later test, which then is no
-    longer library use (tests/session/test_progress.py checks that prints nothing)."""
-    yield
-    from gyrostand import progress
-
-    progress.configure(on=False)
