@@ -23,7 +23,6 @@ stops the others.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -39,8 +38,8 @@ from ..core.model import Model
 from ..core.registry import REGISTRY
 from ..core.results import FitResult, unit_text
 from ..errors import GyrostandError
+from ..runfolder import write_atomic, write_json
 from .online import LkfPoint, OnlineEstimate
-from .outputs import write_atomic
 
 __all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods",
            "write_provisional_result"]
@@ -153,7 +152,7 @@ def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path
            "run_dir": str(run_dir), "dt": cfg.sampling.dt,
            "epoch": cfg.sampling.epoch, "state": "finished",
            "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
-    write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    write_json(path, doc)
 
 
 def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
@@ -167,7 +166,7 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
            "gyros": {g.name: {"model": list(g.model), "t0": None, "bins": 0, "gaps": 0,
                               "observed": 0, "fits": {}, "online": {}} for g in cfg.gyros},
            "stats": {"stop_reason": None}}
-    write_atomic(path, json.dumps(doc, indent=2) + "\n")
+    write_json(path, doc, allow_nan=True)
 
 
 #: the batch refit's column is left out of the table when it is the online value within
