@@ -18,9 +18,10 @@ ignored (no answer); over ``responses.command_rate`` commands per second of fram
 (a :class:`TokenBucket` holding ``max(1, rate)``): refused ``rate_limited``, and those
 refusals are themselves limited to the same rate (beyond it they are only counted,
 ``nacks_suppressed``); a frame the listener marked malformed or without
-Command/Sequence: refused ``malformed`` (echoing what can be read); a code not in
-:data:`gyrostand.can.bus.COMMANDS`: refused ``unknown_command``. Every outcome is counted
-in :attr:`CommandProtocol.counts` (the keys of ``stats()["commands"]``).
+Command/Sequence: refused ``malformed`` (echoing what can be read); a code the command
+message does not name (:attr:`CommandProtocol.command_name`): refused
+``unknown_command``. Every outcome is counted in :attr:`CommandProtocol.counts` (the keys
+of ``stats()["commands"]``).
 
 The protocol does no I/O: :meth:`CommandProtocol.handle` returns the :class:`Ack` to send
 (or None); the daemon sends it.
@@ -114,11 +115,15 @@ class CommandProtocol:
         start_idle: begin ``idle`` instead of ``running``.
         actions: command name → ``action(t)`` run before a successful acknowledgement
             (``reset``, ``snapshot``); an action that raises leaves no acknowledgement.
+        command_name: the name of a decoded ``Command`` code, None for a code the
+            protocol does not know (default: :data:`gyrostand.can.bus.COMMANDS`).
     """
 
     def __init__(self, node: int, rate: float, *, start_idle: bool = False,
-                 actions: Mapping[str, Callable[[float], object]] | None = None) -> None:
+                 actions: Mapping[str, Callable[[float], object]] | None = None,
+                 command_name: Callable[[int], str | None] | None = None) -> None:
         self.node, self.rate = int(node), float(rate)
+        self.command_name = command_name if command_name is not None else COMMANDS.get
         self.actions = dict(actions or {})
         self.state = IDLE if start_idle else RUNNING
         self.stop_requested: str | None = None
@@ -175,7 +180,7 @@ class CommandProtocol:
             log.warning("malformed command at t=%.3f (%s): %s", t, why,
                         {k: v for k, v in values.items() if k != MALFORMED})
             return Ack(c, q, False, MALFORMED_COMMAND)
-        name = COMMANDS.get(c)
+        name = self.command_name(c)
         log.info("command %s (seq %d) at t=%.3f", name or c, q, t)
         if name is None:
             n["unknown"] += 1

@@ -38,6 +38,7 @@ from types import TracebackType
 from typing import Any
 
 from ..can.binning import Bin, Binner, SamplesWriter
+from ..can.bus import COMMANDS
 from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
@@ -105,7 +106,8 @@ class Pipeline:
         self.encoder = self.responses.encoder
         self.protocol = CommandProtocol(
             cfg.responses.node, cfg.responses.command_rate, start_idle=start_idle,
-            actions={"reset": self._reset, "snapshot": self.snapshot})
+            actions={"reset": self._reset, "snapshot": self.snapshot},
+            command_name=self._command_name)
         self.outages = 0
         self.resumed: dict[str, int] = {}
         self.step_ms: deque[float] = deque(maxlen=86_400)  # worker ms per step with bins
@@ -212,6 +214,10 @@ class Pipeline:
                     self.responses.ack(ack)
             except GyrostandError as exc:  # a failing snapshot must not end the run
                 log.error("command %s failed: %s", values, exc)
+
+    def _command_name(self, code: int) -> str | None:
+        """The command a decoded ``Command`` code means."""
+        return COMMANDS.get(code)
 
     def _reset(self, _t: float) -> None:
         """``reset``: the online identifiers restart at the next bin."""

@@ -161,3 +161,11 @@ def test_the_listener_counters_are_the_snapshot_fields():
                        "bad_timestamp", "non_monotonic", "time_jump", "error_frame",
                        "remote_frame", "overflow")
     assert list(asdict(Rejections())) == list(REASONS)
+
+
+def test_command_codes_are_named_by_the_given_table():
+    """A DBC with other numbering: the protocol asks ``command_name``, not a fixed table."""
+    p = CommandProtocol(1, 10.0, start_idle=True, command_name={7: "start"}.get)
+    assert p.handle(0.0, {"Command": 1.0, "Sequence": 1.0}).reason == "unknown_command"
+    ack = p.handle(0.5, {"Command": 7.0, "Sequence": 2.0})
+    assert ack.ok and ack.command == 7 and p.state == RUNNING
