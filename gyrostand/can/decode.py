@@ -20,7 +20,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -30,6 +30,7 @@ from cantools.database.can import Database
 from gyrostand.can.dbc import EXTENDED_KEY_BIT, MessageRef, SignalRef, frame_key, j1939_pgn
 from gyrostand.can.extract import extractor
 from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
+from gyrostand.can.rxstats import REASONS, Counts, DecodeStats, Rejections
 
 try:
     from cantools.database.utils import decode_data as _cantools_decode_data
@@ -38,27 +39,12 @@ except ImportError:  # another cantools: decode_simple is used
 _decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
-           "Sample", "Command", "MALFORMED", "UNRANGED_LIMIT"]
+           "Sample", "Command", "MALFORMED", "UNRANGED_LIMIT", "Counts", "Rejections"]
 
 log = logging.getLogger(__name__)
 
 DRIFT, TEMP = 0, 1
 
-#: Rejection reasons, in the order of :attr:`DecodeStats.rejected`.
-REASONS = (
-    "unknown_id",        # id not in the DBC
-    "wrong_dlc",         # payload length differs from the DBC's message length
-    "undecodable",       # cantools could not decode (e.g. undefined multiplexer value)
-    "out_of_range",      # a mapped value outside the DBC [min|max], or not finite
-    "bad_timestamp",     # timestamp not finite
-    "non_monotonic",     # timestamp earlier than the previous frame with this id
-    "time_jump",         # timestamp more than max_gap after the previous frame
-    "error_frame",
-    "remote_frame",
-    "overflow",          # the sample buffer (or command queue) was full
-)
-(_UNKNOWN_ID, _WRONG_DLC, _UNDECODABLE, _OUT_OF_RANGE, _BAD_TIMESTAMP, _NON_MONOTONIC,
- _TIME_JUMP, _ERROR_FRAME, _REMOTE_FRAME, _OVERFLOW) = range(len(REASONS))
 _isfinite = math.isfinite
 _NEG_INF = -math.inf
 
@@ -97,27 +83,6 @@ class ChannelMap:
             pgn=frozenset(c.signal.message.key for g in cfg.gyros
                           for c in (g.drift, g.temperature) if c.match == "pgn"),
         )
-
-
-@dataclass(frozen=True)
-class DecodeStats:
-    """Snapshot of the listener's counters (cumulative since start or reset)."""
-
-    received: int  # = decoded + ignored + rejected_total + held
-    decoded: int
-    ignored: int
-    samples: int
-    commands: int
-    counter_jumps: int
-    bus_errors: int
-    listener_errors: int
-    rejected: dict[str, int]
-    clock_steps: int = 0  # confirmed steps of the frames' clock (each re-anchored)
-    held: int = 0  # frames waiting for a second frame to confirm their time
-
-    @property
-    def rejected_total(self) -> int:
-        return sum(self.rejected.values())
 
 
 class _Route:
@@ -291,9 +256,8 @@ class DecodingListener(can.Listener):
     def reset_counters(self) -> None:
         """Zero every counter (the FIFO and timestamp history are kept)."""
         with self._lock:
-            self._n = [0] * 7  # received decoded ignored samples commands counter_jumps bus
-            self._listener_errors = 0
-            self._rej = [0] * len(REASONS)
+            self._n = Counts()
+            self._rej = Rejections()
 
     # -- the Notifier's callback -------------------------------------------------------
     def on_message_received(self, msg: can.Message) -> None:
@@ -301,8 +265,8 @@ class DecodingListener(can.Listener):
             f = frame_fields(msg)
         except Exception as exc:  # not a frame at all: received, and failed
             with self._lock:
-                self._n[0] += 1
-                self._listener_errors += 1
+                self._n.received += 1
+                self._n.listener_errors += 1
             log.exception("listener failed on %r: %s", msg, exc)
             return
         try:
@@ -310,7 +274,7 @@ class DecodingListener(can.Listener):
                 self._receive((f,))
         except Exception as exc:  # never let the Notifier thread die
             with self._lock:
-                self._listener_errors += 1
+                self._n.listener_errors += 1
             log.exception("listener failed on %r: %s", msg, exc)
 
     def receive_frames(self, frames: Iterable[Frame]) -> None:
@@ -335,27 +299,27 @@ class DecodingListener(can.Listener):
         while True:
             try:
                 for t, key, flags, data in it:
-                    n[0] += 1
+                    n.received += 1
                     if flags:
                         if flags & ERROR_FRAME:
-                            n[6] += 1
-                            rej[_ERROR_FRAME] += 1
+                            n.bus_errors += 1
+                            rej.error_frame += 1
                         else:
-                            rej[_REMOTE_FRAME] += 1
+                            rej.remote_frame += 1
                         continue
                     route = routes.get(key)
                     if route is None and self._by_pgn:
                         route = self._pgn_route(key)
                     if route is None:
                         if key in self._known:
-                            n[2] += 1
+                            n.ignored += 1
                         else:
-                            rej[_UNKNOWN_ID] += 1
+                            rej.unknown_id += 1
                             if self._pgn_hint:
                                 self._unmatched(key)
                         continue
                     if len(data) != route.length:
-                        rej[_WRONG_DLC] += 1
+                        rej.wrong_dlc += 1
                         if route.is_command:
                             self._malformed_command(route, t, data, "wrong_dlc")
                         continue
@@ -363,23 +327,23 @@ class DecodingListener(can.Listener):
                         self._command(route, t, data)
                         continue
                     if not _isfinite(t):
-                        rej[_BAD_TIMESTAMP] += 1
+                        rej.bad_timestamp += 1
                         continue
                     try:
                         values = route.decode(data)
                     except Exception:
-                        rej[_UNDECODABLE] += 1
+                        rej.undecodable += 1
                         continue
                     extract = route.extract
                     if len(extract) == 1:  # the common case, one mapped signal: no lists
                         g, c, name, lo, hi, cname, mod, ckey = extract[0]
                         v = values.get(name)
                         if v is None:  # multiplexed signal not selected by this frame
-                            n[2] += 1
+                            n.ignored += 1
                             continue
                         v = float(v)
                         if not lo <= v <= hi:  # also false for NaN and +-inf
-                            rej[_OUT_OF_RANGE] += 1
+                            rej.out_of_range += 1
                             continue
                         if (a - window <= t <= a + window and t >= route.last_t
                                 and not held and len(buf) < cap):
@@ -392,11 +356,11 @@ class DecodingListener(can.Listener):
                                     cv = int(cv)
                                     prev = last_counter.get(ckey)
                                     if prev is not None and (cv - prev) % mod != 1 % mod:
-                                        n[5] += 1
+                                        n.counter_jumps += 1
                                     last_counter[ckey] = cv
                             buf.append((g, c, t + offset, v))
-                            n[1] += 1
-                            n[3] += 1
+                            n.decoded += 1
+                            n.samples += 1
                             continue
                         out = [(g, c, t, v)]
                         counted = []
@@ -417,10 +381,10 @@ class DecodingListener(can.Listener):
                             if cname is not None and values.get(cname) is not None:
                                 counted.append((ckey, int(values[cname]), mod))
                         if bad:
-                            rej[_OUT_OF_RANGE] += 1
+                            rej.out_of_range += 1
                             continue
                         if not out:
-                            n[2] += 1
+                            n.ignored += 1
                             continue
                     self._anchor = a
                     try:
@@ -429,7 +393,7 @@ class DecodingListener(can.Listener):
                         offset, a, held = self._offset, self._anchor, bool(self._held)
                 break  # every frame received
             except Exception as exc:  # one bad frame: count it, go on with the next
-                self._listener_errors += 1
+                n.listener_errors += 1
                 log.exception("listener failed on a frame: %s", exc)
             finally:
                 self._anchor = a
@@ -494,10 +458,10 @@ class DecodingListener(can.Listener):
         t, route, out, counted = frame
         rej, n, buf = self._rej, self._n, self._buf
         if t < route.last_t:
-            rej[_NON_MONOTONIC] += 1
+            rej.non_monotonic += 1
             return
         if len(buf) + len(out) > self.capacity:
-            rej[_OVERFLOW] += 1
+            rej.overflow += 1
             return
         route.last_t = t
         if t > self._anchor:
@@ -506,19 +470,23 @@ class DecodingListener(can.Listener):
             self._count(ckey, cv, mod)
         offset = self._offset
         buf.extend([(g, c, tt + offset, v) for g, c, tt, v in out])
-        n[1] += 1
-        n[3] += len(out)
+        n.decoded += 1
+        n.samples += len(out)
 
     def _count(self, ckey: tuple[int, int], cv: int, mod: int) -> None:
         prev = self._last_counter.get(ckey)
         if prev is not None and (cv - prev) % mod != 1 % mod:
-            self._n[5] += 1
+            self._n.counter_jumps += 1
         self._last_counter[ckey] = cv
 
     def _reject_held(self, why: str) -> None:
         a = self._anchor
+        rej = self._rej
         for t, *_ in self._held:
-            self._rej[_TIME_JUMP if t > a else _NON_MONOTONIC] += 1
+            if t > a:
+                rej.time_jump += 1
+            else:
+                rej.non_monotonic += 1
         if self._outliers_logged < 20 or self._outliers_logged % 1000 == 0:
             log.warning("%d frame(s) at t=%.3f rejected, %+.3f s from the bus's time "
                         "%.3f (%s)", len(self._held), self._held[0][0],
@@ -548,15 +516,15 @@ class DecodingListener(can.Listener):
         try:
             values = route.decode(data)
         except Exception:
-            rej[_UNDECODABLE] += 1
+            rej.undecodable += 1
             self._malformed_command(route, t, data, "undecodable")
             return
         if len(self._commands) >= self._command_capacity:
-            rej[_OVERFLOW] += 1
+            rej.overflow += 1
             return
         self._commands.append((t if _isfinite(t) else self.last_timestamp, dict(values)))
-        n[1] += 1
-        n[4] += 1
+        n.decoded += 1
+        n.commands += 1
 
     def _malformed_command(self, route: _Route, t: float, data: bytes | bytearray,
                            why: str) -> None:
@@ -564,7 +532,7 @@ class DecodingListener(can.Listener):
         rejected): queue it marked ``MALFORMED`` so the daemon answers with a nack, with
         whatever signals the bytes present still give (to echo Command and Sequence)."""
         if len(self._commands) >= self._command_capacity:
-            self._rej[_OVERFLOW] += 1
+            self._rej.overflow += 1
             return
         try:
             values = dict(route.message.decode(bytes(data), decode_choices=False,
@@ -578,7 +546,7 @@ class DecodingListener(can.Listener):
         """Called by the Notifier when the bus (or a listener) raised: count and log; the
         Notifier keeps running because this handler exists."""
         with self._lock:
-            self._n[6] += 1
+            self._n.bus_errors += 1
         log.warning("CAN bus error: %s", exc)
 
     # -- consumer side -----------------------------------------------------------------
@@ -614,13 +582,10 @@ class DecodingListener(can.Listener):
     def stats(self) -> DecodeStats:
         """A consistent snapshot of every counter (thread-safe)."""
         with self._lock:
-            n = list(self._n)
-            rej = dict(zip(REASONS, self._rej, strict=True))
-            lerr = self._listener_errors
+            n = replace(self._n)
+            rej = asdict(self._rej)
             steps, held = self._steps, len(self._held)
-        return DecodeStats(received=n[0], decoded=n[1], ignored=n[2], samples=n[3],
-                           commands=n[4], counter_jumps=n[5], bus_errors=n[6],
-                           listener_errors=lerr, rejected=rej, clock_steps=steps, held=held)
+        return DecodeStats(**asdict(n), rejected=rej, clock_steps=steps, held=held)
 
     @property
     def last_timestamp(self) -> float:

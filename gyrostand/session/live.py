@@ -43,20 +43,17 @@ when it stops (:mod:`~gyrostand.session.notify`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
-import signal
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-import can
-
-from ..can.bus import open_bus
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
+from .buslink import Backoff, BusLink, NotifierWatch, StopSignals, open_bus_at_start
 from .notify import ServiceNotify
 from .outputs import (
     RunLock,
@@ -70,153 +67,12 @@ from .outputs import (
 from .pipeline import BusSink, Pipeline, RunOutcome
 from .resume import find_resume_dir, prepare_resume
 
-__all__ = ["run_live", "NotifierWatch", "BusLink"]
+__all__ = ["run_live", "NotifierWatch", "BusLink", "Backoff", "StopSignals",
+           "open_bus_at_start"]
 
 log = logging.getLogger(__name__)
 
 WALL_GRACE = 5.0  # s of wall time beyond --duration when frames stop flowing
-
-
-class NotifierWatch(can.Listener):
-    """A listener that only watches: ``on_error`` counts bus errors and marks as *fatal*
-    any exception that is not a :class:`can.CanError` (a dead connection, a broken pipe),
-    which the Notifier would otherwise report again on every ``recv``: after a fatal one it
-    slows the Notifier's thread down (``pause`` s per error) until the worker stops it."""
-
-    def __init__(self, pause: float = 0.05) -> None:
-        self.errors = 0
-        self.fatal: BaseException | None = None
-        self.pause = pause
-
-    def on_message_received(self, msg: can.Message) -> None:
-        pass
-
-    def on_error(self, exc: Exception) -> None:
-        self.errors += 1
-        if self.fatal is not None:
-            time.sleep(self.pause)
-        elif not isinstance(exc, can.CanError):
-            self.fatal = exc
-            log.error("bus failure: %s: %s", type(exc).__name__, exc)
-
-
-def _notifier_dead(notifier: can.Notifier) -> bool:
-    threads = [r for r in getattr(notifier, "_readers", []) if isinstance(r, threading.Thread)]
-    return any(not t.is_alive() for t in threads)
-
-
-class BusLink:
-    """The bus, its Notifier and watch; closed and reopened across outages.
-
-    ``listeners`` are what the Notifier calls per frame: listener objects (their
-    ``on_error`` sees bus errors) or plain callables. ``Notifier.stop`` calls ``stop()`` on
-    every listener object, so the recorder is given as its bound ``on_message_received``:
-    an outage must not close the raw log."""
-
-    def __init__(self, bus_cfg: Any, listeners: list[Any], sink: BusSink) -> None:
-        self.bus_cfg, self.listeners, self.sink = bus_cfg, listeners, sink
-        self.bus: can.BusABC | None = None
-        self.notifier: can.Notifier | None = None
-        self.watch = NotifierWatch()
-        self.watch_errors = 0
-        self.channel = ""
-
-    def open(self, bus: can.BusABC | None = None) -> None:
-        """Open the bus (or take ``bus``) and start a Notifier on it. Raises
-        :class:`~gyrostand.errors.CanEdgeError`."""
-        self.bus = bus if bus is not None else open_bus(self.bus_cfg)
-        self.channel = str(self.bus.channel_info)
-        self.watch_errors += self.watch.errors
-        self.watch = NotifierWatch()
-        self.notifier = can.Notifier(self.bus, [self.watch, *self.listeners], timeout=0.05)
-        self.sink.bus = self.bus
-
-    def failure(self) -> str | None:
-        """Why the bus is unusable, or None."""
-        if self.watch.fatal is not None:
-            return f"{type(self.watch.fatal).__name__}: {self.watch.fatal}"
-        if self.notifier is not None and _notifier_dead(self.notifier):
-            return "the Notifier thread died"
-        return None
-
-    def stop_notifier(self) -> None:
-        """Stop the Notifier: its listeners get nothing more (the bus stays open for the
-        daemon's last frames)."""
-        if self.notifier is not None:
-            try:
-                self.notifier.stop(timeout=2.0)
-            except Exception as exc:  # a dead Notifier thread may have left an error
-                log.warning("notifier stop: %s", exc)
-            self.notifier = None
-
-    def close(self) -> None:
-        """Stop the Notifier and shut the bus down."""
-        self.sink.bus = None
-        self.stop_notifier()
-        if self.bus is not None:
-            try:
-                self.bus.shutdown()
-            except Exception as exc:  # a dead remote bus may fail to shut down
-                log.warning("bus shutdown: %s", exc)
-            self.bus = None
-
-
-def _permanent(exc: CanEdgeError) -> bool:
-    """A bus that no retry can open: unknown interface, driver not installed, bad args."""
-    return isinstance(exc.__cause__, (can.CanInterfaceNotImplementedError, ImportError,
-                                      TypeError, ValueError))
-
-
-def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
-                      handle_signals: bool = True,
-                      on_waiting: Callable[[str], None] | None = None) -> can.BusABC:
-    """Open ``cfg.bus``; while it cannot be opened, retry with backoff
-    (``reconnect.first_delay`` doubling up to ``max_delay``) for ``reconnect.at_start`` s.
-    Raises :class:`CanEdgeError` (the last failure, with the time waited) when the time is
-    up, at once for a bus that can never open, or when ``stop`` is set / SIGINT or
-    SIGTERM arrives (with ``handle_signals``, in the main thread) while waiting.
-    ``on_waiting(text)`` is called once when the waiting begins (the CLI prints it: a
-    signal for whoever starts the bus after the daemon)."""
-    rc = cfg.reconnect
-    t0 = time.monotonic()
-    delay, attempts = rc.first_delay, 0
-    stop = stop or threading.Event()
-    old: dict[signal.Signals, Any] = {}
-    try:
-        while True:
-            attempts += 1
-            try:
-                bus = open_bus(cfg.bus)
-            except CanEdgeError as exc:
-                waited = time.monotonic() - t0
-                if _permanent(exc) or rc.at_start <= 0:
-                    raise
-                if waited >= rc.at_start or stop.is_set():
-                    why = "stopped" if stop.is_set() else "giving up"
-                    raise CanEdgeError(f"{exc} ({why} after {waited:.1f} s and {attempts} "
-                                       f"attempts, reconnect.at_start {rc.at_start:g} s)"
-                                       ) from exc.__cause__
-                if attempts == 1:
-                    log.warning("%s; waiting for the bus, up to %g s (reconnect.at_start)",
-                                exc, rc.at_start)
-                    if on_waiting is not None:
-                        on_waiting(f"for the bus, up to {rc.at_start:g} s "
-                                   f"(reconnect.at_start)")
-                    if handle_signals and threading.current_thread() is threading.main_thread():
-                        for sig in (signal.SIGINT, signal.SIGTERM):
-                            old[sig] = signal.signal(sig, lambda *_: stop.set())
-                else:
-                    log.info("bus not open yet, attempt %d: %s", attempts, exc)
-                stop.wait(max(0.0, min(delay, rc.at_start - waited)))
-                delay = min(delay * 2, rc.max_delay)
-            else:
-                if attempts > 1:
-                    log.warning("bus opened after %.1f s (%d attempts)",
-                                time.monotonic() - t0, attempts)
-                return bus
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
 
 
 def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
@@ -236,45 +92,35 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
     (default: from ``NOTIFY_SOCKET`` / ``WATCHDOG_USEC`` in the environment).
     ``on_waiting(text)``: called when the daemon begins to wait for a bus that cannot be
     opened yet.
+
+    Every resource (the run folder's lock, the bus, ``run.log``, the raw log, the files,
+    the signal handlers, the notification socket) is released in reverse order of
+    acquisition however the run ends (a :class:`contextlib.ExitStack`).
     """
     notify = notify if notify is not None else ServiceNotify.from_environ()
-    state = None
-    lock: RunLock | None = None
-    if resume is not None and resume is not False:
-        run_dir = find_resume_dir(cfg, None if resume is True else str(resume) or None, out)
-        lock = RunLock(run_dir)  # before touching its files: no other daemon writes it
-        try:
+    with contextlib.ExitStack() as stack:
+        stack.callback(notify.close)
+        state = None
+        if resume is not None and resume is not False:
+            run_dir = find_resume_dir(cfg, None if resume is True else str(resume) or None,
+                                      out)
+            stack.callback(RunLock(run_dir).release)  # before touching its files
             state = prepare_resume(cfg, run_dir)
-        except BaseException:
-            lock.release()
-            raise
-        raw_path = state.segment
-    try:
-        bus = open_bus_at_start(cfg, stop_event, handle_signals, on_waiting)
-    except BaseException:
-        if lock is not None:
-            lock.release()
-        raise
-    try:
+            raw_path = state.segment
+        sink = BusSink(None)
+        link = BusLink(cfg.bus, [], sink)
+        stack.callback(link.close)  # the bus, then (once listening) its Notifier
+        link.bus = open_bus_at_start(cfg, stop_event, handle_signals, on_waiting)
         if state is None:
             run_dir = make_run_dir(out or cfg.output, cfg.name)
             raw_path = run_dir / "raw.blf"
-            lock = RunLock(run_dir)
+            stack.callback(RunLock(run_dir).release)
         check_writable(run_dir)
-        runlog = RunLog(run_dir)
-    except BaseException:
-        bus.shutdown()
-        if lock is not None:
-            lock.release()
-        raise
-    stop = stop_event or threading.Event()
-    signalled: list[str] = []
-    old_handlers: dict[signal.Signals, Any] = {}
-    sink = BusSink(None)
-    link: BusLink | None = None
-    try:
+        stack.callback(RunLog(run_dir).close)
+        stack.callback(link.close)  # (again: so the bus is shut down before run.log closes)
         recorder = Recorder(raw_path, flush_interval=1.0, durable=cfg.fsync,
                             next_path=lambda: next_raw_segment(run_dir))
+        stack.callback(recorder.stop)
 
         def commit_raw() -> None:  # before any bin reaches samples.csv
             recorder.sync() if cfg.fsync else recorder.flush()
@@ -283,26 +129,21 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
 
         segments = SegmentLog(run_dir, raw_path.name,
                               read_segments(run_dir) if state is not None else ())
-        pipe = Pipeline(cfg, run_dir, sink, source="live", start_idle=start_idle,
-                        before_flush=commit_raw, resume=state, sync=cfg.fsync,
-                        segments=segments)
-        if handle_signals and threading.current_thread() is threading.main_thread():
-            def on_signal(signum: int, _frame: Any) -> None:
-                signalled.append(signal.Signals(signum).name)
-                stop.set()
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                old_handlers[sig] = signal.signal(sig, on_signal)
-        link = BusLink(cfg.bus, [pipe.listener, recorder.on_message_received], sink)
-        link.open(bus)
-        outage_s = 0.0
+        pipe = stack.enter_context(Pipeline(
+            cfg, run_dir, sink, source="live", start_idle=start_idle,
+            before_flush=commit_raw, resume=state, sync=cfg.fsync, segments=segments))
+        stopping = stack.enter_context(StopSignals(stop_event or threading.Event(),
+                                                   handle_signals))
+        link.listeners += [pipe.listener, recorder.on_message_received]
+        link.open(link.bus)
         try:
             log.info("ready: session %s on %s, run folder %s%s", cfg.name, link.channel,
                      run_dir, f" (resumed, raw log {raw_path.name})" if state else "")
             if on_ready is not None:
                 on_ready(run_dir)
             notify.ready(f"listening on {link.channel}; run folder {run_dir}")
-            reason, final_state, outage_s = _loop(pipe, recorder, link, stop, signalled,
-                                                  duration, poll, cfg.reconnect, notify)
+            reason, final_state, outage_s = _loop(pipe, recorder, link, stopping, duration,
+                                                  poll, cfg.reconnect, notify)
             notify.stopping(f"stopping: {reason}")
         finally:  # the raw log and the bins end with the same frame, even on an error
             link.stop_notifier()
@@ -312,7 +153,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
         except OutputError as exc:
             log.error("%s", exc)
             reason, final_state = f"{reason}; {exc}", "fault"
-        outcome = pipe.finish(reason, state=final_state, truths=truths, extra_stats={
+        return pipe.finish(reason, state=final_state, truths=truths, extra_stats={
             "recorder": {"file": raw_path.name, "frames": recorder.frames,
                          "flushes": recorder.flushes, "errors": recorder.errors,
                          "unrecordable": recorder.unrecordable,
@@ -322,21 +163,6 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             "bus": {"channel": link.channel,
                     "watch_errors": link.watch_errors + link.watch.errors,
                     "outages": pipe.outages, "outage_s": round(outage_s, 3)}})
-        return outcome
-    finally:
-        for sig, h in old_handlers.items():
-            signal.signal(sig, h)
-        if link is not None:
-            link.close()
-        else:
-            try:
-                bus.shutdown()
-            except Exception as exc:
-                log.warning("bus shutdown: %s", exc)
-        runlog.close()
-        if lock is not None:
-            lock.release()
-        notify.close()
 
 
 def _service_status(pipe: Pipeline, note: str = "") -> str:
@@ -346,9 +172,9 @@ def _service_status(pipe: Pipeline, note: str = "") -> str:
             f"{d.rejected_total} rejected; {pipe.outages} outages")
 
 
-def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Event,
-          signalled: list[str], duration: float | None, poll: float,
-          rc: ReconnectConfig, notify: ServiceNotify) -> tuple[str, str, float]:
+def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: StopSignals,
+          duration: float | None, poll: float, rc: ReconnectConfig,
+          notify: ServiceNotify) -> tuple[str, str, float]:
     """The worker loop; returns (why it stopped, final state, s spent in outages)."""
     start_wall = time.monotonic()
     first_t: float | None = None
@@ -375,11 +201,11 @@ def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Eve
         if pipe.stop_requested:
             return pipe.stop_requested, "stopped", outage_s
         if stop.is_set():
-            return (signalled[0] if signalled else "stop requested"), "stopped", outage_s
+            return stop.reason("stop requested"), "stopped", outage_s
         why = link.failure()
         if why is not None:
             t_out = time.monotonic()
-            back = _reconnect(pipe, recorder, link, stop, rc, why, notify)
+            back = _reconnect(pipe, link, stop, rc, why, notify)
             outage_s += time.monotonic() - t_out
             next_tick = time.monotonic()
             if back is not None:
@@ -392,21 +218,21 @@ def _loop(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Eve
                 return (f"duration {duration:g} s (wall clock, frames stopped)", "stopped",
                         outage_s)
         if not bins and lst.pending() == 0:
-            stop.wait(poll)
+            stop.stop.wait(poll)
 
 
-def _reconnect(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threading.Event,
-               rc: ReconnectConfig, why: str, notify: ServiceNotify) -> tuple[str, str] | None:
-    """An outage: close the bus, reopen it with backoff. None when the bus is back, else
-    (why the run stops, state)."""
+def _reconnect(pipe: Pipeline, link: BusLink, stop: StopSignals, rc: ReconnectConfig,
+               why: str, notify: ServiceNotify) -> tuple[str, str] | None:
+    """An outage: close the bus, reopen it with :class:`Backoff` for up to
+    ``reconnect.max_time`` s. None when the bus is back, else (why the run stops, state)."""
     pipe.outages += 1
-    t0 = time.monotonic()
+    backoff = Backoff.of(rc, rc.max_time)
+    t0 = backoff.start
     log.error("bus outage %d at frame time %.3f: %s; reopening the bus with backoff for "
               "up to %g s (reconnect.max_time)", pipe.outages, pipe.frame_time(), why,
               rc.max_time)
     link.close()
-    delay = rc.first_delay
-    next_try = t0 + min(delay, rc.max_time)
+    next_try = t0 + backoff.next_wait(t0)
     next_tick = t0
     attempts = 0
     while True:
@@ -430,17 +256,16 @@ def _reconnect(pipe: Pipeline, recorder: Recorder, link: BusLink, stop: threadin
                 link.open()
             except CanEdgeError as exc:
                 log.info("bus outage %d: attempt %d failed: %s", pipe.outages, attempts, exc)
-                if now - t0 >= rc.max_time:
+                if backoff.expired(now):
                     log.error("bus outage %d: no bus after %.1f s (%d attempts); giving up",
                               pipe.outages, now - t0, attempts)
                     return (f"bus failure: {why} (no bus after {now - t0:.1f} s, "
                             f"{attempts} attempts)"), "fault"
-                delay = min(delay * 2, rc.max_delay)
-                next_try = min(now + delay, t0 + rc.max_time)
+                next_try = now + backoff.next_wait(now)
             else:
                 pipe.listener.resync()
                 pipe.binner.rebase()
                 log.warning("bus outage %d ended: bus reopened after %.1f s (%d attempts); "
                             "its bins are gaps", pipe.outages, now - t0, attempts)
                 return None
-        stop.wait(min(0.05, max(0.0, min(next_try, next_tick) - time.monotonic())))
+        stop.stop.wait(min(0.05, max(0.0, min(next_try, next_tick) - time.monotonic())))

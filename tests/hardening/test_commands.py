@@ -174,7 +174,7 @@ def test_every_command_frame_is_answered_once_and_the_rate_holds(tmp_path_factor
     cfg = _cfg(tmp_path_factory.mktemp("prop") if CFG is None else None)
     sink = _Sink()
     run_dir = tmp_path_factory.mktemp("run")
-    pipe = Pipeline(cfg, run_dir, sink, source="test")
+    pipe = Pipeline(cfg, run_dir, sink, source="test").open()
     t = T
     executed: list[float] = []
     for dlc, raw, code, target, dt in spec:
