@@ -83,6 +83,8 @@ MAX_GAP_BINS = 1_000_000
 #: |sampling.epoch| and simulate.start at most (s; ~ year 5138): beyond, doubles of frame
 #: time are coarser than 1e-5 s
 MAX_EPOCH = 1e11
+#: how frames are matched to a mapped message: full id, or J1939 PGN (see ChannelConfig)
+MATCHES = ("id", "pgn")
 
 
 @dataclass(frozen=True)
@@ -91,6 +93,9 @@ class ChannelConfig:
 
     signal: SignalRef
     counter: SignalRef | None = None
+    #: "id": frames match on the full id; "pgn": J1939, on the PGN whatever the priority
+    #: and source address (extended ids only)
+    match: str = "id"
 
 
 @dataclass(frozen=True)
@@ -319,6 +324,7 @@ class _Parser:
         self.db: Any = None
         self.dbc_name = "DBC"
         self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
+        self.match = "id"  # the session's default channel `match` once parsed
 
     # -- helpers ---------------------------------------------------------------------
     def fail(self, path: str, msg: str) -> ConfigError:
@@ -407,7 +413,10 @@ class _Parser:
     # -- sections --------------------------------------------------------------------
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
-                           ("sampling", "responses", "simulate", "reconnect"))
+                           ("sampling", "responses", "simulate", "reconnect", "match"))
+        self.match = top.get("match", "id")  # the default of every channel's `match`
+        if self.match not in MATCHES:
+            raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
         sess = self.mapping(top["session"], "session", ("name",), ("output", "fsync"))
         name = self.string(sess["name"], "session.name")
         if not _NAME_RE.match(name):
@@ -474,9 +483,22 @@ class _Parser:
         return SamplingConfig(dt, epoch, buffer, max_gap)
 
     def channel(self, value: Any, path: str) -> ChannelConfig:
-        m = self.mapping(value, path, ("message", "signal"), ("extended", "counter"))
+        m = self.mapping(value, path, ("message", "signal"), ("extended", "counter", "match"))
         ext = self.boolean(m.get("extended"), f"{path}.extended")
         msg = self.message({"message": m["message"], "extended": ext}, path)
+        match = m.get("match", self.match)
+        if match not in MATCHES:
+            raise self.fail(f"{path}.match", f"{match!r} is not one of: {', '.join(MATCHES)}")
+        if match == "pgn" and not msg.is_extended:
+            raise self.fail(f"{path}.match", f"match: pgn needs a 29-bit (J1939) id; "
+                                             f"{msg.describe()} is standard")
+        dbc_msg = self.db.get_message_by_name(msg.name)
+        if msg.length > 8 and not dbc_msg.is_fd:
+            raise self.fail(f"{path}.message", f"{msg.describe()} is {msg.length} bytes: "
+                            "classic CAN carries at most 8 in one frame, and multi-frame "
+                            "messages (J1939 TP, ISO-TP) are not reassembled; if the device "
+                            "sends it as one CAN FD frame, say so in the DBC "
+                            "(BA_ \"VFrameFormat\" BO_ ... 14)")
         sig = self.string(m["signal"], f"{path}.signal")
         try:
             ref = find_signal(self.db, msg.name, sig, source=self.dbc_name)
@@ -489,7 +511,7 @@ class _Parser:
                 counter = find_signal(self.db, msg.name, cname, source=self.dbc_name)
             except CanEdgeError as exc:
                 raise self.fail(f"{path}.counter", str(exc)) from None
-        return ChannelConfig(ref, counter)
+        return ChannelConfig(ref, counter, match)
 
     def gyro(self, value: Any, path: str) -> GyroConfig:
         m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
@@ -606,15 +628,26 @@ class _Parser:
             raise self.fail(path, str(exc)) from None
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
-        owner: dict[tuple[int, str], str] = {}
+        """A drift signal belongs to one gyro; a temperature signal may serve several (one
+        sensor on a multi-axis IMU's board), but never also as a drift."""
+        owner: dict[tuple[int, str], tuple[str, str]] = {}
         for i, g in enumerate(gyros):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
                 key = (c.signal.message.key, c.signal.name)
                 path = f"gyros[{i}].{ch}.signal"
-                if key in owner:
+                if key in owner and (ch == "drift" or owner[key][1] == "drift"):
                     raise self.fail(path, f"{c.signal.message.name}.{c.signal.name} is already "
-                                          f"mapped by {owner[key]}")
-                owner[key] = path
+                                          f"mapped by {owner[key][0]}")
+                owner.setdefault(key, (path, ch))
+        keys: dict[int, tuple[str, str]] = {}
+        for i, g in enumerate(gyros):  # one message, one way of matching it
+            for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
+                k = c.signal.message.key
+                path = f"gyros[{i}].{ch}.match"
+                if k in keys and keys[k][1] != c.match:
+                    raise self.fail(path, f"{c.signal.message.name} is matched by "
+                                          f"{keys[k][1]} at {keys[k][0]}")
+                keys.setdefault(k, (path, c.match))
 
     def responses(self, value: Any) -> ResponsesConfig:
         m = self.mapping(value, "responses", (),

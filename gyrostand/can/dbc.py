@@ -41,6 +41,14 @@ def frame_key(arbitration_id: int, is_extended: bool) -> int:
     return arbitration_id | EXTENDED_KEY_BIT if is_extended else arbitration_id
 
 
+def j1939_pgn(frame_id: int) -> int:
+    """The J1939 parameter group number of a 29-bit id: the id without its priority and
+    source address, and without the destination address (PS) when the PDU format is
+    below 240 (PDU1); cantools' ``j1939.pgn_from_frame_id``, inlined for the receive path."""
+    pgn = (frame_id >> 8) & 0x3FFFF
+    return pgn & 0x3FF00 if (pgn >> 8) & 0xFF < 240 else pgn
+
+
 @dataclass(frozen=True)
 class MessageRef:
     """A resolved DBC message: name, id, whether the id is extended, payload length (bytes)."""

@@ -2,7 +2,9 @@
 decoded samples to one bounded FIFO, counting everything it rejects by reason.
 
 Per frame the work is constant: one dict lookup by frame id (standard and extended ids are
-different keys), a length check, one ``Message.decode(decode_choices=False)``, a range and
+different keys), a length check, one decode of the mapped signals (a precompiled
+extractor, :mod:`gyrostand.can.extract`, whatever the DBC's byte order and widths;
+cantools for multiplexed signals and commands), a range and
 timestamp check per mapped signal, and an append. Estimation, binning and I/O happen in the
 consumer (:meth:`DecodingListener.drain`), never in the Notifier's thread.
 
@@ -25,7 +27,8 @@ from typing import Any
 import can
 from cantools.database.can import Database
 
-from gyrostand.can.dbc import MessageRef, SignalRef, frame_key
+from gyrostand.can.dbc import EXTENDED_KEY_BIT, MessageRef, SignalRef, frame_key, j1939_pgn
+from gyrostand.can.extract import extractor
 from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
 
 try:
@@ -66,6 +69,8 @@ _Held = tuple[float, "_Route", list[Sample], list[tuple[tuple[int, int], int, in
 #: the largest |value| of a mapped signal whose DBC gives no range (a payload beyond it is
 #: garbage, e.g. a float32 near its 3.4e38 limit; it would overflow the estimators)
 UNRANGED_LIMIT = 1e12
+#: routes at most (ids cached for `match: pgn`: 8 priorities x 256 source addresses each)
+MAX_ROUTES = 65536
 Command = tuple[float, dict[str, float]]
 #: key of a queued command frame that could not be decoded (value: index in REASONS)
 MALFORMED = "__malformed__"
@@ -74,11 +79,14 @@ MALFORMED = "__malformed__"
 @dataclass(frozen=True)
 class ChannelMap:
     """What the listener extracts: ``signals[g][c]`` is the :class:`SignalRef` of channel c
-    (0 drift, 1 temperature) of gyro g; ``counters[g][c]`` its rolling counter or None."""
+    (0 drift, 1 temperature) of gyro g; ``counters[g][c]`` its rolling counter or None;
+    ``pgn`` the frame keys of the messages matched by J1939 PGN (any priority and source
+    address) instead of by their full id."""
 
     gyros: tuple[str, ...]
     signals: tuple[tuple[SignalRef, SignalRef], ...]
     counters: tuple[tuple[SignalRef | None, SignalRef | None], ...] = ()
+    pgn: frozenset[int] = frozenset()
 
     @classmethod
     def from_config(cls, cfg) -> ChannelMap:  # cfg: gyrostand.config.SessionConfig
@@ -86,6 +94,8 @@ class ChannelMap:
             gyros=tuple(g.name for g in cfg.gyros),
             signals=tuple((g.drift.signal, g.temperature.signal) for g in cfg.gyros),
             counters=tuple((g.drift.counter, g.temperature.counter) for g in cfg.gyros),
+            pgn=frozenset(c.signal.message.key for g in cfg.gyros
+                          for c in (g.drift, g.temperature) if c.match == "pgn"),
         )
 
 
@@ -223,8 +233,23 @@ class DecodingListener(can.Listener):
                     mod = int(cnt.maximum) + 1
                 route.extract.append((g, c, ref.name, lo, hi,
                                       cnt.name if cnt else None, mod, (g, c)))
-        if command is not None:
-            self._route(db, command).is_command = True
+        for route in self._routes.values():  # the mapped signals only, layout-blind
+            needed = [x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+            route.decode = extractor(route.message, needed) or route.decode
+        # J1939: PGN -> route of the messages matched by PGN; an extended id of such a PGN
+        # is looked up once and then cached in _routes under its own key
+        self._by_pgn = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r for k, r in self._routes.items()
+                        if k in channels.pgn}
+        # the other extended mapped messages by PGN, to say once when frames of their PGN
+        # arrive from another source address (matching on the full id drops them)
+        self._pgn_hint = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r.message.name
+                          for k, r in self._routes.items()
+                          if k & EXTENDED_KEY_BIT and k not in channels.pgn}
+        self._hinted: set[int] = set()
+        if command is not None:  # a command is read whole, by cantools
+            route = self._route(db, command)
+            route.is_command = True
+            route.decode = _decoder(route.message)
         self.reset_counters()
 
     def _route(self, db: Database, ref: MessageRef) -> _Route:
@@ -232,6 +257,29 @@ class DecodingListener(can.Listener):
             msg = db.get_message_by_name(ref.name)
             self._routes[ref.key] = _Route(msg, msg.length)
         return self._routes[ref.key]
+
+    def _pgn_route(self, key: int) -> _Route | None:
+        """The route of an extended id by its J1939 PGN (``match: pgn``), cached under the
+        id; None for a standard id or another PGN."""
+        if not key & EXTENDED_KEY_BIT:
+            return None
+        route = self._by_pgn.get(j1939_pgn(key & ~EXTENDED_KEY_BIT))
+        if route is not None and len(self._routes) < MAX_ROUTES:
+            self._routes[key] = route
+        return route
+
+    def _unmatched(self, key: int) -> None:
+        """Log once per id an extended frame whose PGN is a mapped message's (another
+        priority or source address: it decodes with ``match: pgn``)."""
+        if not key & EXTENDED_KEY_BIT or key in self._hinted or len(self._hinted) >= 64:
+            return
+        name = self._pgn_hint.get(j1939_pgn(key & ~EXTENDED_KEY_BIT))
+        if name is not None:
+            self._hinted.add(key)
+            log.warning("frames 0x%X carry the J1939 PGN of mapped message %s but another "
+                        "priority or source address; they are not decoded (unknown_id). "
+                        "Set `match: pgn` on its channels to take them.",
+                        key & ~EXTENDED_KEY_BIT, name)
 
     def resync(self) -> None:
         """After a bus outage: forget the rolling counters' last values (frames were lost).
@@ -296,11 +344,15 @@ class DecodingListener(can.Listener):
                             rej[_REMOTE_FRAME] += 1
                         continue
                     route = routes.get(key)
+                    if route is None and self._by_pgn:
+                        route = self._pgn_route(key)
                     if route is None:
                         if key in self._known:
                             n[2] += 1
                         else:
                             rej[_UNKNOWN_ID] += 1
+                            if self._pgn_hint:
+                                self._unmatched(key)
                         continue
                     if len(data) != route.length:
                         rej[_WRONG_DLC] += 1

@@ -145,7 +145,7 @@ class Survey:
 
     messages: list[Message]
     gyros: list[GyroProposal]
-    #: drift signals that found no temperature of their own (with the reason)
+    #: drift signals that found no temperature signal at all (with the reason)
     left_out: list[tuple[SignalInfo, str]]
     #: role -> message names of the daemon's own frames found in the DBC
     daemon_messages: dict[str, list[str]]
@@ -292,15 +292,18 @@ def survey(db: Database, source: str = "DBC") -> Survey:
             continue
         chosen[i] = j
         used_t.add(j)
+    shared: set[int] = set()  # a drift left without a sensor of its own takes its best one
+    for score, i, j in pairs:  # (one sensor on a multi-axis board serves several gyros)
+        if i not in chosen and score >= 0:
+            chosen[i] = j
+            shared.add(i)
     msgs = {m.name: m for m in db.messages}
     gyros: list[GyroProposal] = []
     left_out: list[tuple[SignalInfo, str]] = []
     taken: set[str] = set()
     for i, d in enumerate(drifts):
         if i not in chosen:
-            why = ("every temperature signal is mapped to another gyro (a session maps a "
-                   "signal once)") if len(temps) < len(drifts) else "no temperature signal fits"
-            left_out.append((d, why))
+            left_out.append((d, "no temperature signal fits"))
             continue
         t = temps[chosen[i]]
         name = _gyro_name(d, taken)
@@ -312,6 +315,9 @@ def survey(db: Database, source: str = "DBC") -> Survey:
         if t.kind is None:
             g.notes.append(f"{t.describe()} has no temperature unit ({t.unit!r}): proposed "
                            "by name")
+        if i in shared:
+            g.notes.append(f"shares {t.describe()} with another gyro (no sensor of its own "
+                           "fits better)")
         gyros.append(g)
     gyros.sort(key=lambda g: (g.drift.frame_id, g.drift.signal))
     return Survey(list(db.messages), gyros, left_out, daemon, warnings)

@@ -182,3 +182,25 @@ def test_an_initialised_session_runs_end_to_end(tmp_path, dbc, extra, temps, gam
         if temps[0] < 100:  # in degC; in K, gamma·T and the bias are confounded in 300 s
             est = got["fits"]["ml"]["parameters"]["temp.gamma"]["value"]
             assert est == pytest.approx(gamma, rel=0.10), g
+
+
+ONE_SENSOR = """VERSION ""
+BO_ 2566869249 TRIAD_RATES: 8 IMU
+ SG_ RateX : 0|21@1- (0.001,0) [-1000|1000] "deg/h" X
+ SG_ RateY : 21|21@1- (0.001,0) [-1000|1000] "deg/h" X
+ SG_ RateZ : 42|21@1- (0.001,0) [-1000|1000] "deg/h" X
+BO_ 2566869250 BOARD: 4 IMU
+ SG_ BoardTemp : 0|16@1- (0.01,0) [-60|150] "degC" X
+"""
+
+
+def test_one_temperature_sensor_for_three_gyros(tmp_path, capsys):
+    """A triad with one board sensor: every axis is proposed with it (a session may map
+    one temperature signal to several gyros), none left out, and the file validates."""
+    dbc = tmp_path / "triad.dbc"
+    dbc.write_text(ONE_SENSOR)
+    cfg = load_config(_init(tmp_path, dbc))
+    assert [g.drift.signal.name for g in cfg.gyros] == ["RateX", "RateY", "RateZ"]
+    assert {g.temperature.signal.name for g in cfg.gyros} == {"BoardTemp"}
+    text = (tmp_path / "stand" / "session.yaml").read_text()
+    assert "left out" not in text and text.count("shares BOARD") == 2
