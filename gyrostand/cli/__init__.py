@@ -12,10 +12,25 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import allan, demo, diagnose, export, fit, identify, init, replay, report, run, simulate
+from . import (
+    allan,
+    demo,
+    design,
+    diagnose,
+    export,
+    fit,
+    identify,
+    init,
+    replay,
+    report,
+    run,
+    simulate,
+)
 
 SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export)
+               export, design)
+#: commands that are (or start) the daemon: no progress output (its stderr is a journal)
+DAEMON_COMMANDS = ("run",)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,19 +57,25 @@ def _add_global_args(parser: argparse.ArgumentParser, default: Any) -> None:
                    dest=f"debug_{id(parser)}", help="show tracebacks on errors")
     g.add_argument("-v", "--verbose", action="count", default=default,
                    dest=f"verbose_{id(parser)}", help="more logging (-vv: debug)")
+    g.add_argument("-q", "--quiet", action="store_true", default=default,
+                   dest=f"quiet_{id(parser)}",
+                   help="no progress bars: one line per finished stage on stderr")
 
 
 def _gather_globals(args: argparse.Namespace) -> None:
-    """Sum ``-v`` and OR ``--debug`` over the main parser and the subcommand's."""
-    verbose, debug = 0, False
-    for key in [k for k in vars(args) if k.startswith(("verbose_", "debug_"))]:
+    """Sum ``-v`` and OR ``--debug``, ``--quiet`` over the main parser and the
+    subcommand's."""
+    verbose, debug, quiet = 0, False, False
+    for key in [k for k in vars(args) if k.startswith(("verbose_", "debug_", "quiet_"))]:
         value = getattr(args, key)
         delattr(args, key)
         if key.startswith("verbose_"):
             verbose += int(value)
+        elif key.startswith("quiet_"):
+            quiet = quiet or bool(value)
         else:
             debug = debug or bool(value)
-    args.verbose, args.debug = verbose, debug
+    args.verbose, args.debug, args.quiet = verbose, debug, quiet
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -66,6 +87,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             faulthandler.register(signal.SIGUSR1, all_threads=True)
         except (ValueError, OSError):  # stderr is no file (io.UnsupportedOperation)
             pass
+    from .. import progress  # stdlib only; tqdm is imported when a bar is drawn
+
+    progress.configure(on=args.command not in DAEMON_COMMANDS, quiet=args.quiet)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level

@@ -19,6 +19,7 @@ from pathlib import Path
 import can
 import numpy as np
 
+from .. import progress
 from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
 from ..can.logread import LogDamage
@@ -59,16 +60,19 @@ def run_replay(cfg: SessionConfig,
     try:
         pipe = Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}")
         log.info("replaying %s into %s", what, run_dir)
-        for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
-                           pump_every=pump_every, parallel=parallel, damage=damage):
-            pipe.step(bins)
-        pipe.step([])
+        with progress.stage("replay", "stream", unit="bins") as bar:
+            for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
+                               pump_every=pump_every, parallel=parallel, damage=damage):
+                pipe.step(bins)
+                bar.update(len(bins))
+            pipe.step([])
         if damage.total:
             log.warning("%s: %d damaged part(s) of the log skipped (%d containers, %d "
                         "truncated, %d lines)", what, damage.total, damage.containers,
                         damage.truncated, damage.lines)
-        return pipe.finish("end of log", truths=truths,
-                           extra_stats={"log": damage.as_dict()})
+        with progress.stage("replay", "final fits and report"):
+            return pipe.finish("end of log", truths=truths,
+                               extra_stats={"log": damage.as_dict()})
     except BaseException as exc:
         _mark_failed(run_dir / "result.json", cfg, f"replay of {what}", run_dir, exc)
         raise

@@ -1,0 +1,89 @@
+"""Progress of a long command (#14 item 4): a tqdm bar on a pseudo-terminal, one line per
+finished stage in a pipe or with --quiet; the real CLI in a subprocess each time."""
+
+from __future__ import annotations
+
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from sessionhelpers import write_cfg_yaml
+
+STAGE_LINE = re.compile(r"^replay: stream: [\d,]+ bins in [\d.]+ s$", re.M)
+
+
+@pytest.fixture(scope="module")
+def replay_args(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("progress")
+    cfg = write_cfg_yaml(tmp / "s.yaml", tmp / "runs", {"interface": "virtual"},
+                         duration=600.0, rates={"drift": 20, "temperature": 10})
+    log = tmp / "stand.blf"
+    subprocess.run([sys.executable, "-m", "gyrostand", "simulate", str(cfg), "--log", str(log)],
+                   check=True, capture_output=True, timeout=300)
+    return ["replay", str(cfg), str(log), "--out", str(tmp / "runs")]
+
+
+def _on_pty(args: list[str]) -> str:
+    """Run with stderr (and stdout) on a pseudo-terminal; everything it printed."""
+    master, slave = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "gyrostand", *args], stdin=subprocess.DEVNULL,
+                         stdout=slave, stderr=slave, close_fds=True)
+    os.close(slave)
+    chunks: list[bytes] = []
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        r, _, _ = select.select([master], [], [], 0.5)
+        if r:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif p.poll() is not None:
+            break
+    p.wait(30)
+    os.close(master)
+    assert p.returncode == 0, b"".join(chunks).decode(errors="replace")[-2000:]
+    return b"".join(chunks).decode(errors="replace")
+
+
+def test_a_bar_on_a_terminal(replay_args):
+    out = _on_pty(replay_args)
+    assert "replay: stream" in out and "bins/s" in out  # tqdm's rate
+    assert "\r" in out  # redrawn in place
+    assert not STAGE_LINE.search(out.replace("\r\n", "\n"))
+
+
+def test_stage_lines_in_a_pipe(replay_args):
+    p = subprocess.run([sys.executable, "-m", "gyrostand", *replay_args],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert STAGE_LINE.search(p.stderr), p.stderr
+    assert re.search(r"^replay: final fits and report: in [\d.]+ s$", p.stderr, re.M)
+    assert "\r" not in p.stderr and "bins/s" not in p.stderr
+    n = int(STAGE_LINE.search(p.stderr).group(0).split()[2].replace(",", ""))
+    assert 590 <= n <= 602  # the 600-s log's bins
+
+
+def test_quiet_on_a_terminal_gives_stage_lines(replay_args):
+    out = _on_pty(["-q", *replay_args]).replace("\r\n", "\n")
+    assert STAGE_LINE.search(out) and "bins/s" not in out
+
+
+def test_nothing_from_library_use(replay_args, capsys):
+    """Imported as a library (tests, scripts), gyrostand prints no progress."""
+    from gyrostand.config import load_config
+    from gyrostand.session.offline import run_replay
+
+    cfg = load_config(replay_args[1])
+    run_replay(cfg, Path(replay_args[2]), out=Path(replay_args[4]))
+    err = capsys.readouterr().err
+    assert "replay: stream" not in err
