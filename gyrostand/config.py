@@ -324,6 +324,7 @@ class _Parser:
         self.db: Any = None
         self.dbc_name = "DBC"
         self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
+        self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
         self.match = "id"  # the session's default channel `match` once parsed
 
     # -- helpers ---------------------------------------------------------------------
@@ -413,7 +414,8 @@ class _Parser:
     # -- sections --------------------------------------------------------------------
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
-                           ("sampling", "responses", "simulate", "reconnect", "match"))
+                           ("sampling", "responses", "simulate", "reconnect", "match",
+                            "plugins"))
         self.match = top.get("match", "id")  # the default of every channel's `match`
         if self.match not in MATCHES:
             raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
@@ -436,6 +438,7 @@ class _Parser:
         except CanEdgeError as exc:
             raise self.fail("dbc", str(exc)) from None
         sampling = self.sampling(top.get("sampling", {}))
+        self.terms = self.plugins(top.get("plugins"))
         gyros_raw = top["gyros"]
         if not isinstance(gyros_raw, list) or not gyros_raw:
             raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
@@ -458,6 +461,26 @@ class _Parser:
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
             reconnect=reconnect,
         )
+
+    def plugins(self, value: Any) -> tuple[str, ...]:
+        """Load the term plugins (installed entry points, then ``plugins: [module, ...]``):
+        the model terms the rest of the file may use."""
+        from gyrostand.errors import ModelError
+        from gyrostand.plugins import known_terms, load_entry_points, load_modules
+
+        try:
+            load_entry_points()
+        except ModelError as exc:
+            raise self.fail("plugins", str(exc)) from None
+        mods = [] if value is None else value
+        if not isinstance(mods, list) or not all(isinstance(m, str) and m for m in mods):
+            raise self.fail("plugins", f"expected a list of module names, got {_kind(value)}")
+        for i, m in enumerate(mods):
+            try:
+                load_modules([m])
+            except ModelError as exc:
+                raise self.fail(f"plugins[{i}]", str(exc)) from None
+        return known_terms()
 
     def reconnect(self, value: Any) -> ReconnectConfig:
         m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay",
@@ -521,7 +544,7 @@ class _Parser:
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
-        model = self.names(m["model"], f"{path}.model", MODEL_TERMS)
+        model = self.names(m["model"], f"{path}.model", self.terms)
         self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
                             IDENTIFIERS)
@@ -710,7 +733,7 @@ class _Parser:
         for gname, spec in sim_gyros.items():
             q = f"{p}.gyros.{gname}"
             s = self.mapping(spec, q, ("model", "params"), ())
-            model = self.names(s["model"], f"{q}.model", MODEL_TERMS)
+            model = self.names(s["model"], f"{q}.model", self.terms)
             kinds = {f"{t.name}.{prm.name}": prm.kind
                      for t in self.model_of(model, f"{q}.model").terms for prm in t.params}
             params = self.mapping(s["params"], f"{q}.params", (),
@@ -719,9 +742,9 @@ class _Parser:
             vals: dict[str, float] = {}
             for k, v in params.items():
                 mt = _PARAM_RE.match(str(k))
-                if not mt or mt.group(1) not in MODEL_TERMS:
+                if not mt or mt.group(1) not in self.terms:
                     raise self.fail(f"{q}.params.{k}", "expected '<term>.<param>' with a term "
-                                    f"of: {', '.join(MODEL_TERMS)}")
+                                    f"of: {', '.join(self.terms)}")
                 if mt.group(1) not in model:
                     raise self.fail(f"{q}.params.{k}", f"term {mt.group(1)!r} is not in "
                                     f"{q}.model")

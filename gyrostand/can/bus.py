@@ -16,7 +16,7 @@ import can
 from cantools.database.can import Database, Message
 
 from gyrostand.can.dbc import MessageRef, find_message
-from gyrostand.core.terms import VOCABULARY
+from gyrostand.core.terms import VOCABULARY, summary_bits
 from gyrostand.errors import CanEdgeError
 
 __all__ = [
@@ -33,7 +33,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Bit i of ``ModelTerms`` in GS_SUMMARY = term i (PRODUCT.md's vocabulary order).
+#: Bit i of ``ModelTerms`` in GS_SUMMARY = term i (PRODUCT.md's vocabulary order); a plugin
+#: term's bit follows the built-ins' (its ``Term.bit``, :func:`model_terms_mask`).
 MODEL_TERM_BITS = VOCABULARY
 IDENTIFIER_CODES = {"lkf": 0, "lsq": 1, "ml": 2}
 STATE_CODES = {"idle": 0, "running": 1, "stopping": 2, "stopped": 3, "fault": 4}
@@ -44,9 +45,20 @@ ACK_REASONS = {"ok": 0, "unknown_command": 1, "wrong_state": 2, "busy": 3, "malf
 COMMANDS = {1: "start", 2: "stop", 3: "reset", 4: "snapshot"}
 
 
-def model_terms_mask(terms: Sequence[str]) -> int:
-    """``ModelTerms`` bitmask of a model's term names (unknown extra terms are skipped)."""
-    return sum(1 << MODEL_TERM_BITS.index(t) for t in terms if t in MODEL_TERM_BITS)
+def model_terms_mask(terms: Sequence[str], width: int | None = None) -> int:
+    """``ModelTerms`` bitmask of a model's term names: bit ``Term.bit`` of each (the
+    built-ins in vocabulary order, plugins after them). An unknown term, or one whose bit
+    does not fit a signal of ``width`` bits, is a CanEdgeError naming it."""
+    bits = summary_bits()
+    mask = 0
+    for t in terms:
+        if t not in bits:
+            raise CanEdgeError(f"ModelTerms: unknown model term {t!r}")
+        if width is not None and bits[t] >= width:
+            raise CanEdgeError(f"ModelTerms: term {t!r} has summary bit {bits[t]}, beyond "
+                               f"the {width}-bit ModelTerms signal of the DBC; widen it")
+        mask |= 1 << bits[t]
+    return mask
 
 
 def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
@@ -56,6 +68,11 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
         return can.Bus(**dict(bus_cfg))
     except Exception as exc:  # CanError, ImportError of a driver, OSError, TypeError...
         raise CanEdgeError(f"cannot open CAN bus ({where}): {exc}") from exc
+
+
+def _width(msg: Message, signal: str) -> int | None:
+    """Bit length of ``signal`` in ``msg`` (None when the message lacks it)."""
+    return next((int(x.length) for x in msg.signals if x.name == signal), None)
 
 
 def _wrap(value: int, sig) -> int:
@@ -168,7 +185,9 @@ class FrameEncoder:
         """Fit summary; Samples and ResidualRms saturate at the DBC maximum."""
         return self.encode(ref, {
             "Identifier": IDENTIFIER_CODES[identifier], "Status": STATUS_CODES[status],
-            "ModelTerms": model_terms_mask(model_terms), "Samples": samples,
+            "ModelTerms": model_terms_mask(model_terms, _width(self._message(ref),
+                                                                "ModelTerms")),
+            "Samples": samples,
             "ResidualRms": residual_rms if math.isfinite(residual_rms) else 0.0,
         }, timestamp=timestamp)
 
