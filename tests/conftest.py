@@ -31,14 +31,3 @@ def c1_samples(base_model):
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
-
-
-@pytest.fixture(autouse=True)
-def _library_progress_after_the_cli():
-    """Tests run the command line in-process, and ``main`` turns progress output on for
-    the process (as the CLI should): turned off again after each test, so that the library
-    use of the tests after it prints none (tests/session/test_progress.py checks it)."""
-    yield
-    from gyrostand import progress
-
-    progress.configure(on=False)
