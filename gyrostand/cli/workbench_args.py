@@ -42,7 +42,7 @@ def check_run_folder(path: Path) -> None:
 
 def fmt_estimate(value: float, std: float, unit: str, fixed: bool = False,
                  drift_unit: str = "y") -> str:
-    from ..core.results import unit_text
+    """``value ± std unit`` (:func:`gyrostand.render.text.estimate`)."""
+    from ..render.text import estimate
 
-    sd = "fixed" if fixed else f"± {std:.3g}"
-    return f"{value:.6g} {sd} {unit_text(unit, drift_unit)}"
+    return estimate(value, std, unit, fixed, drift_unit)
