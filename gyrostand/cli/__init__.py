@@ -13,9 +13,10 @@ from typing import Any
 from .. import __version__
 from ..errors import GyrostandError
 from . import allan, demo, diagnose, export, fit, identify, init, replay, report, run, simulate
+from . import batch as batch  # the Dask batch (#16); imports Dask only when it runs
 
 SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export)
+               export, batch)
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 
