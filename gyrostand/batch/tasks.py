@@ -207,6 +207,16 @@ def _gyro_row(run_dir: Path, gyro: str, ginfo: dict[str, Any], opts: TaskOptions
     return row
 
 
+def _peak_rss_mib() -> float | None:
+    """This worker process's peak resident memory so far (MiB), where the OS tells."""
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return None
+    kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
+    return round(kib / 1024, 1)
+
+
 # --- the task -----------------------------------------------------------------------------
 
 def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
@@ -256,6 +266,7 @@ def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
         rec["error"] = _error_text(exc)
         rec["traceback"] = traceback.format_exc()[-4000:]
     rec["seconds"] = round(time.perf_counter() - t0, 3)
+    rec["worker_peak_rss_mib"] = _peak_rss_mib()
     try:
         _write_record(out_p, rec)
     except Exception as exc:  # noqa: BLE001 - the client records it then
