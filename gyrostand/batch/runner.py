@@ -127,8 +127,12 @@ def _is_done(rec: dict[str, Any] | None, spec: RunSpec, opts: TaskOptions,
              retry_failed: bool) -> bool:
     if rec is None or rec.get("version") != RECORD_VERSION:
         return False
-    if rec.get("options") != opts.to_dict() or rec.get("input") != spec.to_dict():
-        return False  # another model, method, steps, config or attributes: redo
+    was = rec.get("input") or {}
+    if rec.get("options") != opts.to_dict() or any(
+            was.get(k) != v for k, v in spec.to_dict().items() if k != "attrs"):
+        return False  # another model, method, steps, input or session file: redo
+    # (the attributes are the manifest's, read again for the table: editing them redoes
+    # nothing)
     if rec.get("status") == "failed" and retry_failed:
         return False
     return rec.get("status") in ("ok", "partial", "failed")

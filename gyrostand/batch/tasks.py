@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..errors import DataError
 from .inputs import RunSpec
 
 __all__ = ["TaskOptions", "run_task", "failed_record", "result_path", "read_record",
@@ -124,13 +125,13 @@ def _replay_into(spec: RunSpec, out: Path) -> Path:
     if spec.kind == "folder":
         logs: list[Path] = raw_segments(Path(spec.path))
         if not logs:
-            raise FileNotFoundError(f"{spec.path}: no raw log (raw.blf) to replay")
+            raise DataError(f"{spec.path}: no raw log (raw.blf) to replay")
         config = spec.config
         if config is None:
             info = json.loads((Path(spec.path) / "result.json").read_text(encoding="utf-8"))
             config = info.get("config")
             if not config:
-                raise ValueError(f"{spec.path}/result.json: no 'config' to replay it with")
+                raise DataError(f"{spec.path}/result.json: no 'config' to replay it with")
     else:
         logs = [Path(spec.path)]
         config = spec.config
@@ -159,7 +160,7 @@ def _run_info(run_dir: Path) -> dict[str, Any]:
     check_run_folder(run_dir)
     info = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
     if info.get("state") == "failed":
-        raise RuntimeError(f"{run_dir}: the run failed: {info.get('error', 'no reason given')}")
+        raise DataError(f"{run_dir}: the run failed: {info.get('error', 'no reason given')}")
     return info
 
 
@@ -243,11 +244,11 @@ def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
                          "rejected": dec.get("rejected_total"), "log_damage": n_damage}
         if dec and not dec.get("received"):
             notes = "; ".join(str(n) for n in damage.get("notes") or ())
-            raise ValueError(f"{spec.path}: no CAN frame read from the log"
+            raise DataError(f"{spec.path}: no CAN frame read from the log"
                              + (f" ({notes})" if notes else ""))
         gyros = info.get("gyros") or {}
         if not gyros:
-            raise ValueError(f"{run_dir}/result.json: the run has no gyros")
+            raise DataError(f"{run_dir}/result.json: the run has no gyros")
         for gyro, ginfo in gyros.items():
             try:
                 row = _gyro_row(run_dir, gyro, ginfo, opts)

@@ -113,6 +113,12 @@ def test_a_model_change_redoes_every_run_and_only_then(archive, tmp_path):
     assert spec in plan(specs, TaskOptions(), out, force=True)
     assert spec in plan(specs, TaskOptions(model="markov,temp,temp_rate"), out)
     assert spec in plan(specs, TaskOptions(method="lsq"), out)
+    import dataclasses
+
+    relabelled = dataclasses.replace(spec, attrs={**spec.attrs, "serial": "U4-renamed"})
+    assert plan([relabelled], TaskOptions(), out) == []  # an attribute edited: not redone
+    other_cfg = dataclasses.replace(spec, config=str(archive["root"] / "u1-b.yaml"))
+    assert plan([other_cfg], TaskOptions(), out) == [other_cfg]  # another session file
 
 
 def test_external_scheduler_and_worker_processes_kill_and_resume(archive, tmp_path,

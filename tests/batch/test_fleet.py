@@ -103,3 +103,15 @@ def test_without_dask_the_error_names_the_extra(monkeypatch, capsys):
                         lambda name, *a: None if name == "distributed" else real(name, *a))
     assert main(["batch", "x.blf", "--out", "o"]) == 2
     assert "pip install 'gyrostand[fleet]'" in capsys.readouterr().err
+
+
+def test_bad_steps_and_models_are_usage_errors_before_any_work(capsys, tmp_path):
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "fit"]) == 2
+    assert "--do 'fit': steps are replay, identify, diagnose (got fit)" in \
+        capsys.readouterr().err
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "replay"]) == 2
+    assert "give identify and/or diagnose" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--model",
+                 "markov,nosuchterm"]) == 2
+    assert "nosuchterm" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
