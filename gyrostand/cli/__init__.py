@@ -12,11 +12,24 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import allan, demo, diagnose, export, fit, identify, init, replay, report, run, simulate
-from . import batch as batch  # the Dask batch (#16); imports Dask only when it runs
+from . import (
+    allan,
+    batch,
+    demo,
+    design,
+    diagnose,
+    export,
+    fit,
+    identify,
+    init,
+    replay,
+    report,
+    run,
+    simulate,
+)
 
 SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export, batch)
+               export, design, batch)
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 
@@ -67,6 +80,17 @@ def _gather_globals(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; progress output is on for its duration only (an in-process call,
+    e.g. from a test or a script, leaves the library silent afterwards)."""
+    from .. import progress
+
+    try:
+        return _main(argv)
+    finally:
+        progress.configure(on=False)
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _gather_globals(args)

@@ -37,16 +37,6 @@ TRUTH = {"markov.beta": 0.0333, "markov.sigma": 0.1, "temp.gamma": -0.001}
 HIDDEN_K = 10.0
 
 
-@pytest.fixture(autouse=True)
-def _progress_off_after():
-    """``main()`` turns progress on for its process (as the CLI does): off again after each
-    test, so library use in later tests prints none (tests/session/test_progress.py)."""
-    yield
-    from gyrostand import progress
-
-    progress.configure(on=False)
-
-
 def session_file(path: Path, seed: int, hidden: bool = False) -> Path:
     d = copy.deepcopy(yaml.safe_load(DEMO.read_text()))
     d["session"]["output"] = str(path.parent / "runs")
@@ -99,9 +89,6 @@ def archive(tmp_path_factory) -> dict[str, Path]:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    from gyrostand import progress
-
-    progress.configure(on=False)
     return {"root": root, "manifest": manifest}
 
 

@@ -1,0 +1,290 @@
+"""``gyrostand design [RUN|CSV] --model TERMS --param NAME=VALUE ... [limits] [--goal G]
+[--out DIR] [--verify N]``: the chamber program that best determines the parameters in
+doubt, within the chamber's limits, with its predicted std beside the reference profile's
+(the run's own record, or a standard cycle of the same duration)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..core.names import VOCABULARY
+from .common import number
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "design", help="design the next chamber run: the temperature program that best "
+                       "determines the parameters in doubt",
+        description=__doc__)
+    p.add_argument("run", nargs="?", default=None,
+                   help="a run folder or CSV: its current model fitted by ML gives the "
+                        "parameters, and its own record is the reference (optional)")
+    p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
+    p.add_argument("--model", default=None,
+                   help=f"comma-separated terms of: {', '.join(VOCABULARY)} (default: the "
+                        "run's current model)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a parameter's current value (e.g. temp_rate.k=5); every parameter "
+                        "of --model without a run; overrides the run's fit")
+    p.add_argument("--t-min", type=float, default=0.0, help="chamber minimum, °C (0)")
+    p.add_argument("--t-max", type=float, default=50.0, help="chamber maximum, °C (50)")
+    p.add_argument("--max-rate", type=number(positive=True), default=1.0,
+                   help="maximum ramp rate, °C/min (1)")
+    p.add_argument("--min-soak", type=number(nonnegative=True), default=10.0,
+                   help="minimum soak at each leg's target, min (10)")
+    p.add_argument("--hours", type=number(positive=True), default=None,
+                   help="run duration, h (default: the run's, else 6)")
+    p.add_argument("--legs", type=int, default=6, help="ramp+soak legs (6)")
+    p.add_argument("--lag", type=number(nonnegative=True), default=0.0,
+                   help="chamber-to-case time constant, min (0: the case follows the "
+                        "set-point)")
+    p.add_argument("--start", type=float, default=None,
+                   help="start temperature, °C (default: mid-range)")
+    p.add_argument("--goal", default="d-optimal",
+                   help="d-optimal (default), worst (the worst-determined, relative), or "
+                        "std:PARAM")
+    p.add_argument("--doubt", default=None,
+                   help="the parameters in doubt, comma-separated (default: every one)")
+    p.add_argument("--evaluations", type=int, default=120,
+                   help="likelihood-information evaluations per search start (120)")
+    p.add_argument("--verify", type=int, default=0, metavar="N",
+                   help="simulate N runs of the designed and of the reference profile, fit "
+                        "them by ML, print realized std beside predicted")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", default="design", metavar="DIR",
+                   help="folder for program.csv, profile.csv, simulate.yaml, design.json, "
+                        "design.png (default ./design)")
+    p.add_argument("--json", action="store_true", help="print design.json")
+    p.set_defaults(func=run)
+
+
+def _params(args: argparse.Namespace) -> dict[str, float]:
+    from ..errors import ModelError
+
+    out: dict[str, float] = {}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ModelError(f"--param {item!r}: expected NAME=VALUE, e.g. "
+                             "temp_rate.k=5") from None
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .. import progress
+    from ..core.design import ChamberLimits, case_temperature, design
+    from ..core.model import Model
+    from ..errors import ModelError
+
+    given = _params(args)
+    reference_record = None
+    if args.run is not None:
+        from ..core.ml import ml
+        from ..workbench import open_subject
+
+        subject = open_subject(args.run, gyro=args.gyro, model=args.model)
+        model = subject.model
+        with progress.stage("design", "fit of the run"):
+            fit = ml(subject.samples, model)
+        params = {**fit.values, **given}
+        reference_record = (subject.samples.t - subject.samples.t[0], subject.samples.temp)
+        hours = args.hours or float(reference_record[0][-1]) / 3600.0
+    else:
+        if args.model is None:
+            raise ModelError("design: give a run (its model and fit) or --model with --param")
+        model = Model.parse(args.model)
+        params = {"white.sigma": 0.0, **given}
+        hours = args.hours or 6.0
+    model.check_params(params)
+    limits = ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
+                           hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
+                           start=args.start)
+    doubt = [n.strip() for n in args.doubt.split(",")] if args.doubt else None
+    with progress.stage("design", "search", unit="evaluations") as bar:
+        res = design(model, params, limits, goal=args.goal, doubt=doubt,
+                     maxfev=args.evaluations, seed=args.seed, progress=bar.update)
+    ref_label = "standard cycle"
+    if reference_record is not None:
+        from ..core.fisher import crlb
+
+        t, temp = reference_record
+        res.reference_predicted = crlb(model, params, t, temp, dt=float(np.median(np.diff(t))),
+                                       n_mc=40, seed=args.seed + 1)
+        ref_label = "this run's record"
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    case = case_temperature(res.program.setpoint(limits.duration), limits)
+    ref_case = case_temperature(res.reference.setpoint(limits.duration), limits)
+    _write_files(out, res, limits, case, ref_case, reference_record, ref_label, model)
+    verify = None
+    if args.verify > 0:
+        verify = _verify(model, params, limits, case,
+                         reference_record or (limits.grid, ref_case), args.verify, args.seed)
+    doc = _document(res, limits, model, ref_label, verify)
+    (out / "design.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    if args.json:
+        json.dump(doc, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(render(res, limits, ref_label, verify, out))
+    return 0
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
+    name, rel = res.worst()
+    rname, rrel = res.worst("reference")
+    return {
+        "goal": res.goal, "model": list(model.names), "params": res.params,
+        "doubt": list(res.doubt),
+        "limits": {"t_min": limits.t_min, "t_max": limits.t_max,
+                   "max_rate_degC_per_min": limits.max_rate * 60.0,
+                   "min_soak_s": limits.min_soak, "duration_s": limits.duration,
+                   "legs": limits.legs, "lag_s": limits.lag, "start": limits.t0},
+        "program": [{"target_degC": T, "rate_degC_per_min": r * 60.0, "soak_s": s}
+                    for T, r, s in res.program.legs],
+        "predicted_std": {n: _finite(v) for n, v in res.predicted.items()},
+        "reference": ref_label,
+        "reference_std": {n: _finite(v) for n, v in res.reference_predicted.items()},
+        "worst": {"designed": [name, _finite(rel)], "reference": [rname, _finite(rrel)]},
+        "evaluations": res.evaluations,
+        "verify": verify,
+    }
+
+
+def _write_files(out: Path, res, limits, case, ref_case, reference_record, ref_label: str,
+                 model) -> None:
+    import numpy as np
+
+    rows = res.program.rows()
+    with open(out / "program.csv", "w", encoding="utf-8", newline="") as fh:
+        fh.write("time_s,setpoint_degC\n")
+        for t, T in rows:
+            fh.write(f"{t:.1f},{T:.3f}\n")
+    grid = limits.grid
+    sp = res.program.setpoint(limits.duration)(grid)
+    with open(out / "profile.csv", "w", encoding="utf-8", newline="") as fh:
+        fh.write("t,setpoint_degC,case_degC\n")
+        for k in range(grid.size):
+            fh.write(f"{grid[k]:g},{sp[k]:.4f},{case[k]:.4f}\n")
+    # the simulator's profile: the case temperature's breakpoints (every minute with a lag)
+    if limits.lag > 0:
+        idx = np.unique(np.concatenate([np.arange(0, grid.size, 60), [grid.size - 1]]))
+        pts = [[float(grid[i]), round(float(case[i]), 4)] for i in idx]
+    else:
+        pts = [[round(t, 1), round(T, 4)] for t, T in rows]
+    lines = ["# gyrostand design: paste into a session file's simulate: section to rehearse",
+             f"# the designed run ({res.goal}); the case temperature the model sees.",
+             "simulate:", f"  duration: {limits.duration:g}", "  temperature:"]
+    lines += [f"    - [{t:g}, {T:g}]" for t, T in pts]
+    (out / "simulate.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    _plot(out / "design.png", grid, sp, case, ref_case, reference_record, ref_label, res)
+
+
+def _plot(path: Path, grid, sp, case, ref_case, reference_record, ref_label, res) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 4))
+    h = grid / 3600.0
+    ax.plot(h, sp, lw=1.0, color="C0", ls="--", label="designed set-point")
+    ax.plot(h, case, lw=1.6, color="C0", label="designed, case")
+    if reference_record is not None:
+        ax.plot(reference_record[0] / 3600.0, reference_record[1], lw=1.2, color="C1",
+                label=ref_label)
+    else:
+        ax.plot(h, ref_case, lw=1.2, color="C1", label=ref_label)
+    name, rel = res.worst()
+    rname, rrel = res.worst("reference")
+    ax.set_title(f"{res.goal}: worst relative std {rel:.3g} ({name}) vs {rrel:.3g} ({rname})")
+    ax.set_xlabel("time, h")
+    ax.set_ylabel("temperature, °C")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[str, Any]:
+    """Realized std of ML over ``n`` simulated runs on each profile."""
+    import numpy as np
+
+    from .. import progress
+    from ..core.ml import ml
+    from ..core.simulate import simulate
+
+    out: dict[str, Any] = {"runs": n}
+    for label, (t, temp) in (("designed", (limits.grid, case)), ("reference", reference)):
+        est: dict[str, list[float]] = {k: [] for k in model.param_names}
+        failed = 0
+        rng = np.random.default_rng([seed, 952, 0 if label == "designed" else 1])
+        with progress.stage("design", f"verify {label}", total=n, unit="fits") as bar:
+            for _ in range(n):
+                s = simulate(model, params, t=t, temp=temp, dt=limits.dt, seed=rng)
+                try:
+                    r = ml(s, model)
+                except Exception:
+                    failed += 1
+                    bar.update(1)
+                    continue
+                for k in est:
+                    est[k].append(r.value(k))
+                bar.update(1)
+        out[label] = {"failed": failed,
+                      "realized_std": {k: float(np.std(v, ddof=1)) if len(v) > 2 else None
+                                       for k, v in est.items()},
+                      "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}
+    return out
+
+
+def render(res, limits, ref_label: str, verify, out: Path) -> str:
+    lines = [f"design ({res.goal}; {res.evaluations} evaluations), "
+             f"{limits.duration / 3600:g} h, {limits.t_min:g}..{limits.t_max:g} °C, "
+             f"≤ {limits.max_rate * 60:g} °C/min, soaks ≥ {limits.min_soak / 60:g} min, "
+             f"lag {limits.lag / 60:g} min",
+             "", f"program (from {res.program.start:.1f} °C):"]
+    if res.program is res.reference:
+        lines.insert(1, "no program better than the reference was found: it is proposed")
+    for j, (T, r, s) in enumerate(res.program.legs, 1):
+        lines.append(f"  leg {j}: ramp at {r * 60:.3g} °C/min to {T:.1f} °C, soak "
+                     f"{s / 60:.1f} min")
+    lines += ["", f"{'parameter':<16}{'value':>12}{'std designed':>16}{'std ' + ref_label:>26}"
+                  f"{'ratio':>8}"]
+    for n, v in res.predicted.items():
+        ref = res.reference_predicted.get(n, math.nan)
+        mark = " *" if n in res.doubt and len(res.doubt) < len(res.predicted) else ""
+        lines.append(f"{n + mark:<16}{res.params[n]:>12.4g}{v:>16.4g}{ref:>26.4g}"
+                     f"{ref / v if v > 0 else math.nan:>8.2f}")
+    name, rel = res.worst()
+    rname, rrel = res.worst("reference")
+    lines.append(f"worst-determined (relative std): designed {name} {rel:.3g}, "
+                 f"{ref_label} {rname} {rrel:.3g}")
+    if verify is not None:
+        lines += ["", f"verify: {verify['runs']} simulated runs each, fitted by ML "
+                      "(realized std / predicted)"]
+        for n in res.predicted:
+            d = verify["designed"]["realized_std"].get(n)
+            r = verify["reference"]["realized_std"].get(n)
+            pd, pr = res.predicted[n], res.reference_predicted.get(n, math.nan)
+            lines.append(f"  {n:<16} designed {d:.4g} ({d / pd:.2f})   reference {r:.4g} "
+                         f"({r / pr:.2f})" if d is not None and r is not None
+                         else f"  {n:<16} too few successful fits")
+    lines += ["", f"files: {out}/program.csv (the chamber program), profile.csv, "
+                  "simulate.yaml, design.json, design.png"]
+    return "\n".join(lines)
