@@ -93,10 +93,6 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
         raise CanEdgeError(f"cannot open CAN bus ({where}): {exc}") from exc
 
 
-def _width(msg: Message, signal: str) -> int | None:
-    """Bit length of ``signal`` in ``msg`` (None when the message lacks it)."""
-    return next((int(x.length) for x in msg.signals if x.name == signal), None)
-
 
 def _wrap(value: int, sig) -> int:
     """Cumulative counts wrap modulo the signal's range (documented in dbc/README.md)."""
@@ -234,7 +230,7 @@ class FrameEncoder:
         ``ModelTerms`` mask wider than its signal is an error (never saturated)."""
         msg = self._message(ref)
         codes = self.codes(ref, "summary")
-        mask = model_terms_mask(model_terms, _width(msg, "ModelTerms"))  # names the term
+        mask = model_terms_mask(model_terms)
         check_width(msg, "ModelTerms", mask, f"the model {', '.join(model_terms)}")
         return self.encode(ref, {
             "Identifier": self._code(msg, codes["Identifier"], identifier),
