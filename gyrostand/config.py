@@ -38,8 +38,11 @@ from typing import Any
 
 import yaml
 
+from gyrostand.can.codes import check_width, role_codes
 from gyrostand.can.dbc import MessageRef, SignalRef, find_message, find_signal, load_dbc
+from gyrostand.core import registry
 from gyrostand.core.names import LKF_VARIANTS, VOCABULARY
+from gyrostand.core.registry import LkfOptions
 from gyrostand.errors import CanEdgeError, ConfigError
 
 __all__ = [
@@ -63,7 +66,8 @@ log = logging.getLogger(__name__)
 
 #: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
 MODEL_TERMS = VOCABULARY
-IDENTIFIERS = ("lkf", "lsq", "ml")
+#: every identifier a gyro's ``identifiers:`` may name (the registry's)
+IDENTIFIERS = registry.names()
 
 #: Signals the daemon writes or reads in its own response/command messages.
 RESULT_SIGNALS = ("Kind", "Identifier", "Param", "Value", "Std", "NParams", "Counter")
@@ -106,41 +110,10 @@ class ResultConfig:
     summary: MessageRef | None = None
 
 
-@dataclass(frozen=True)
-class LkfConfig:
-    """Online LKF of one gyro: linearisation point and held noise levels.
-
-    ``beta0`` (1/s), ``gamma0`` (drift unit per s·degC), ``b0`` (drift unit) are the
-    linearisation point; ``sigma`` (``markov.sigma``) and ``white_sigma`` (``white.sigma``)
-    the held noise levels (drift unit); ``held`` any further held parameter by name (e.g.
-    ``random_walk.q``). A value left out (None) is *estimated from a warm-up*: the first
-    ``warmup`` bins (s of data at Δt = 1 s) are fitted by least squares (point) and the
-    core's held-value estimate (noise levels), then the filter starts and replays those
-    bins. The paper's fixed point 1e-4 is not used: it biases the estimates badly.
-    ``iterate`` re-linearises the paper variant's *final* batch LKF until it settles.
-
-    ``variant``: ``relin`` (default, the converging filter of
-    :mod:`gyrostand.core.lkf_relin`: feedback, re-linearised every ``relinearize_every``
-    bins, default 100 s of bins, with the noise levels the file does not give re-estimated)
-    or ``paper`` (the paper's single pass at a fixed point). ``soaked``: start the moving
-    point in equilibrium with the first temperature (relin only; default true).
-    """
-
-    beta0: float | None = None
-    gamma0: float | None = None
-    b0: float | None = None
-    sigma: float | None = None
-    white_sigma: float | None = None
-    held: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
-    warmup: int = 300
-    iterate: bool = False
-    variant: str = "relin"
-    relinearize_every: int | None = None
-    soaked: bool = True
-
-    @property
-    def needs_warmup(self) -> bool:
-        return None in (self.beta0, self.gamma0, self.b0, self.sigma, self.white_sigma)
+#: The online LKF of a gyro (its ``lkf:`` section): the lkf identifier's typed options
+#: (:class:`~gyrostand.core.registry.LkfOptions`; a value left out is estimated from a
+#: warm-up of ``warmup`` bins).
+LkfConfig = LkfOptions
 
 
 @dataclass(frozen=True)
@@ -152,6 +125,13 @@ class GyroConfig:
     identifiers: tuple[str, ...]
     result: ResultConfig | None = None
     lkf: LkfConfig = field(default_factory=LkfConfig)
+
+    def options(self, identifier: str) -> Any:
+        """The typed options of ``identifier`` for this gyro: its section of the session
+        file where it has one (``lkf:``), else the identifier's defaults."""
+        ident = registry.get(identifier)
+        section = getattr(self, ident.name, None)
+        return section if isinstance(section, ident.Options) else ident.Options()
 
 
 @dataclass(frozen=True)
@@ -324,6 +304,7 @@ class _Parser:
         self.db: Any = None
         self.dbc_name = "DBC"
         self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
+        self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
         self.match = "id"  # the session's default channel `match` once parsed
 
     # -- helpers ---------------------------------------------------------------------
@@ -403,17 +384,39 @@ class _Parser:
             return value
         raise self.fail(path, f"expected true or false, got {_kind(value)}")
 
-    def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...]) -> None:
-        have = {s.name for s in self.db.get_message_by_name(ref.name).signals}
+    def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...],
+                        role: str | None = None) -> None:
+        """``ref`` must carry the signals ``needed``; for a message of the daemon's in
+        ``role`` (``result``, ``summary``, ``status``, ``ack``, ``command``) also the value
+        tables of its codes (:func:`gyrostand.can.codes.role_codes`)."""
+        msg = self.db.get_message_by_name(ref.name)
+        have = {s.name for s in msg.signals}
         missing = [s for s in needed if s not in have]
         if missing:
             raise self.fail(path, f"message {ref.name} lacks signal(s) {', '.join(missing)} "
                                   f"needed here (see dbc/README.md)")
+        if role is not None:
+            try:
+                role_codes(msg, role, self.dbc_name)
+            except CanEdgeError as exc:
+                raise self.fail(path, str(exc)) from None
+
+    def require_width(self, ref: MessageRef, path: str, model: tuple[str, ...]) -> None:
+        """The summary's ``ModelTerms`` must have a bit for every term of ``model``."""
+        from gyrostand.can.bus import model_terms_mask
+
+        try:
+            check_width(self.db.get_message_by_name(ref.name), "ModelTerms",
+                        model_terms_mask(model), f"the model {', '.join(model)}",
+                        self.dbc_name)
+        except CanEdgeError as exc:
+            raise self.fail(path, str(exc)) from None
 
     # -- sections --------------------------------------------------------------------
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
-                           ("sampling", "responses", "simulate", "reconnect", "match"))
+                           ("sampling", "responses", "simulate", "reconnect", "match",
+                            "plugins"))
         self.match = top.get("match", "id")  # the default of every channel's `match`
         if self.match not in MATCHES:
             raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
@@ -436,6 +439,7 @@ class _Parser:
         except CanEdgeError as exc:
             raise self.fail("dbc", str(exc)) from None
         sampling = self.sampling(top.get("sampling", {}))
+        self.terms = self.plugins(top.get("plugins"))
         gyros_raw = top["gyros"]
         if not isinstance(gyros_raw, list) or not gyros_raw:
             raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
@@ -458,6 +462,26 @@ class _Parser:
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
             reconnect=reconnect,
         )
+
+    def plugins(self, value: Any) -> tuple[str, ...]:
+        """Load the term plugins (installed entry points, then ``plugins: [module, ...]``):
+        the model terms the rest of the file may use."""
+        from gyrostand.errors import ModelError
+        from gyrostand.plugins import known_terms, load_entry_points, load_modules
+
+        try:
+            load_entry_points()
+        except ModelError as exc:
+            raise self.fail("plugins", str(exc)) from None
+        mods = [] if value is None else value
+        if not isinstance(mods, list) or not all(isinstance(m, str) and m for m in mods):
+            raise self.fail("plugins", f"expected a list of module names, got {_kind(value)}")
+        for i, m in enumerate(mods):
+            try:
+                load_modules([m])
+            except ModelError as exc:
+                raise self.fail(f"plugins[{i}]", str(exc)) from None
+        return known_terms()
 
     def reconnect(self, value: Any) -> ReconnectConfig:
         m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay",
@@ -521,31 +545,35 @@ class _Parser:
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
-        model = self.names(m["model"], f"{path}.model", MODEL_TERMS)
+        model = self.names(m["model"], f"{path}.model", self.terms)
         self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
                             IDENTIFIERS)
-        if "markov" not in model:
-            # lkf linearises the markov state's dynamics and lsq regresses on it: without
-            # it only ml (which takes every term) can identify the model
-            need = [i for i in idents if i in ("lkf", "lsq")]
-            if need and "identifiers" in m:
-                raise self.fail(f"{path}.identifiers", f"{', '.join(need)} need(s) 'markov' "
+        # an identifier needing a term the model lacks (lkf linearises the markov state's
+        # dynamics, lsq regresses on it) cannot identify it at all; terms it cannot
+        # represent otherwise are reported at run time (status failed, with the reason)
+        lacking = {t: [i for i in idents if t in registry.get(i).requires]
+                   for t in dict.fromkeys(t for i in idents for t in registry.get(i).requires)
+                   if t not in model}
+        for term, need in lacking.items():
+            if "identifiers" in m:
+                raise self.fail(f"{path}.identifiers", f"{', '.join(need)} need(s) {term!r} "
                                 f"in the model ({', '.join(model)}); use identifiers: [ml]")
-            if need:
-                log.warning("%s: %s: the model (%s) has no markov term: lkf and lsq need "
-                            "it, so only ml identifies this gyro (at the end of the run)",
-                            self.source, path, ", ".join(model))
-                idents = tuple(i for i in idents if i not in ("lkf", "lsq"))
+            log.warning("%s: %s: the model (%s) has no %s term: %s need it, so only ml "
+                        "identifies this gyro (at the end of the run)",
+                        self.source, path, ", ".join(model), term, " and ".join(need))
+            idents = tuple(i for i in idents if i not in need)
         result = None
         if m.get("result") is not None:
             r = self.mapping(m["result"], f"{path}.result", ("message",), ("summary",))
             values = self.message(r["message"], f"{path}.result.message")
-            self.require_signals(values, f"{path}.result.message", RESULT_SIGNALS)
+            self.require_signals(values, f"{path}.result.message", RESULT_SIGNALS, "result")
             summary = None
             if r.get("summary") is not None:
                 summary = self.message(r["summary"], f"{path}.result.summary")
-                self.require_signals(summary, f"{path}.result.summary", SUMMARY_SIGNALS)
+                self.require_signals(summary, f"{path}.result.summary", SUMMARY_SIGNALS,
+                                     "summary")
+                self.require_width(summary, f"{path}.result.summary", model)
             result = ResultConfig(values, summary)
         lkf = self.lkf(m.get("lkf") or {}, f"{path}.lkf", model)
         return GyroConfig(name, drift, temp, model, idents, result, lkf)
@@ -662,7 +690,8 @@ class _Parser:
             refs[key] = None
             if m.get(key) is not None:
                 refs[key] = self.message(m[key], f"responses.{key}")
-                self.require_signals(refs[key], f"responses.{key}", needed)  # type: ignore[arg-type]
+                self.require_signals(refs[key], f"responses.{key}", needed,  # type: ignore[arg-type]
+                                     key)
         node = self.integer(m.get("node", 1), "responses.node", 0, 254)
         rate = self.number(m.get("command_rate", 10.0), "responses.command_rate", lo=0.0,
                            lo_open=True)
@@ -710,7 +739,7 @@ class _Parser:
         for gname, spec in sim_gyros.items():
             q = f"{p}.gyros.{gname}"
             s = self.mapping(spec, q, ("model", "params"), ())
-            model = self.names(s["model"], f"{q}.model", MODEL_TERMS)
+            model = self.names(s["model"], f"{q}.model", self.terms)
             kinds = {f"{t.name}.{prm.name}": prm.kind
                      for t in self.model_of(model, f"{q}.model").terms for prm in t.params}
             params = self.mapping(s["params"], f"{q}.params", (),
@@ -719,9 +748,9 @@ class _Parser:
             vals: dict[str, float] = {}
             for k, v in params.items():
                 mt = _PARAM_RE.match(str(k))
-                if not mt or mt.group(1) not in MODEL_TERMS:
+                if not mt or mt.group(1) not in self.terms:
                     raise self.fail(f"{q}.params.{k}", "expected '<term>.<param>' with a term "
-                                    f"of: {', '.join(MODEL_TERMS)}")
+                                    f"of: {', '.join(self.terms)}")
                 if mt.group(1) not in model:
                     raise self.fail(f"{q}.params.{k}", f"term {mt.group(1)!r} is not in "
                                     f"{q}.model")

@@ -2,7 +2,11 @@
 
 Every payload is encoded by cantools from signal values; nothing is hand-packed. The frame
 layouts are described in ``dbc/README.md``; a user DBC that carries messages with the same
-signal names works the same way (the session loader checks the signals exist).
+signal names works the same way (the session loader checks the signals exist). Code numbers
+(identifier, status, state, command, ack result and reason) are the DBC's own, read from
+its value tables (:mod:`gyrostand.can.codes`): a DBC with another numbering is encoded with
+its numbers, and one lacking a name is refused when its message is first used (the
+session loader checks this at load).
 """
 
 from __future__ import annotations
@@ -15,8 +19,17 @@ from typing import Any
 import can
 from cantools.database.can import Database, Message
 
+from gyrostand.can.codes import (
+    ACK_REASON_NAMES,
+    COMMAND_NAMES,
+    STATES,
+    STATUSES,
+    ValueCodes,
+    check_width,
+    role_codes,
+)
 from gyrostand.can.dbc import MessageRef, find_message
-from gyrostand.core.terms import VOCABULARY
+from gyrostand.core.terms import VOCABULARY, summary_bits
 from gyrostand.errors import CanEdgeError
 
 __all__ = [
@@ -33,20 +46,42 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Bit i of ``ModelTerms`` in GS_SUMMARY = term i (PRODUCT.md's vocabulary order).
+#: Bit i of ``ModelTerms`` in GS_SUMMARY = term i (PRODUCT.md's vocabulary order); a plugin
+#: term's bit follows the built-ins' (its ``Term.bit``, :func:`model_terms_mask`).
 MODEL_TERM_BITS = VOCABULARY
-IDENTIFIER_CODES = {"lkf": 0, "lsq": 1, "ml": 2}
-STATE_CODES = {"idle": 0, "running": 1, "stopping": 2, "stopped": 3, "fault": 4}
-STATUS_CODES = {"ok": 0, "warning": 1, "not_converged": 2, "failed": 3,
-                "insufficient_data": 4}
-ACK_REASONS = {"ok": 0, "unknown_command": 1, "wrong_state": 2, "busy": 3, "malformed": 4,
-               "not_for_me": 5, "rate_limited": 6}
-COMMANDS = {1: "start", 2: "stop", 3: "reset", 4: "snapshot"}
+
+#: The numbering of the project's ``dbc/gyrostand.dbc`` (what dbc/generate.py writes; a
+#: test checks they agree), for tools and files that speak the project's numbering. The
+#: encoder does not use them: frames carry the codes of the DBC they are encoded with.
+STATE_CODES = {name: i for i, name in enumerate(STATES)}
+STATUS_CODES = {name: i for i, name in enumerate(STATUSES)}
+ACK_REASONS = {name: i for i, name in enumerate(ACK_REASON_NAMES)}
+COMMANDS = {i: name for i, name in enumerate(COMMAND_NAMES, start=1)}
 
 
-def model_terms_mask(terms: Sequence[str]) -> int:
-    """``ModelTerms`` bitmask of a model's term names (unknown extra terms are skipped)."""
-    return sum(1 << MODEL_TERM_BITS.index(t) for t in terms if t in MODEL_TERM_BITS)
+def _identifier_codes() -> dict[str, int]:
+    from gyrostand.core.registry import names
+
+    return {name: i for i, name in enumerate(names())}
+
+
+IDENTIFIER_CODES = _identifier_codes()
+
+
+def model_terms_mask(terms: Sequence[str], width: int | None = None) -> int:
+    """``ModelTerms`` bitmask of a model's term names: bit ``Term.bit`` of each (the
+    built-ins in vocabulary order, plugins after them). An unknown term, or one whose bit
+    does not fit a signal of ``width`` bits, is a CanEdgeError naming it."""
+    bits = summary_bits()
+    mask = 0
+    for t in terms:
+        if t not in bits:
+            raise CanEdgeError(f"ModelTerms: unknown model term {t!r}")
+        if width is not None and bits[t] >= width:
+            raise CanEdgeError(f"ModelTerms: term {t!r} has summary bit {bits[t]}, beyond "
+                               f"the {width}-bit ModelTerms signal of the DBC; widen it")
+        mask |= 1 << bits[t]
+    return mask
 
 
 def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
@@ -56,6 +91,11 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
         return can.Bus(**dict(bus_cfg))
     except Exception as exc:  # CanError, ImportError of a driver, OSError, TypeError...
         raise CanEdgeError(f"cannot open CAN bus ({where}): {exc}") from exc
+
+
+def _width(msg: Message, signal: str) -> int | None:
+    """Bit length of ``signal`` in ``msg`` (None when the message lacks it)."""
+    return next((int(x.length) for x in msg.signals if x.name == signal), None)
 
 
 def _wrap(value: int, sig) -> int:
@@ -75,11 +115,35 @@ class FrameEncoder:
     def __init__(self, db: Database, bus: can.BusABC | None = None) -> None:
         self.db = db
         self.bus = bus
+        self._codes: dict[tuple[str, str], dict[str, ValueCodes]] = {}
 
     def _message(self, ref: str | int | MessageRef) -> Message:
         if isinstance(ref, MessageRef):
             return self.db.get_message_by_name(ref.name)
         return find_message(self.db, ref)[1]
+
+    def codes(self, ref: str | int | MessageRef, role: str) -> dict[str, ValueCodes]:
+        """The checked value tables of message ``ref`` in ``role`` (``result``,
+        ``summary``, ``status``, ``command``, ``ack``) by signal name, read once."""
+        msg = self._message(ref)
+        key = (msg.name, role)
+        if key not in self._codes:
+            self._codes[key] = role_codes(msg, role)
+        return self._codes[key]
+
+    def _code(self, msg: Message, table: ValueCodes, name: str) -> float:
+        """The physical value carrying ``name``'s raw code."""
+        sig = msg.get_signal_by_name(table.signal)
+        return table.code(name) * sig.scale + sig.offset
+
+    def command_name(self, ref: str | int | MessageRef, code: float) -> str | None:
+        """The command (``start``, ``stop``, ...) that the decoded ``Command`` value
+        ``code`` of message ``ref`` means in its value table; None for a number it does not
+        list."""
+        msg = self._message(ref)
+        sig = msg.get_signal_by_name("Command")
+        raw = round((float(code) - sig.offset) / sig.scale)
+        return self.codes(ref, "command")["Command"].name(raw)
 
     def encode(self, ref: str | int | MessageRef, signals: Mapping[str, float], *,
                timestamp: float = 0.0) -> can.Message:
@@ -153,7 +217,8 @@ class FrameEncoder:
         """Two frames per parameter i: Kind 0 with the estimate, Kind 1 with its std."""
         if len(values) != len(stds):
             raise CanEdgeError(f"{len(values)} values but {len(stds)} standard deviations")
-        code = IDENTIFIER_CODES[identifier]
+        msg = self._message(ref)
+        code = self._code(msg, self.codes(ref, "result")["Identifier"], identifier)
         out = []
         for i, (v, s) in enumerate(zip(values, stds, strict=True)):
             common = {"Identifier": code, "Param": i, "NParams": len(values),
@@ -165,10 +230,16 @@ class FrameEncoder:
     def summary_frame(self, ref: str | MessageRef, identifier: str, status: str,
                       model_terms: Sequence[str], samples: int, residual_rms: float, *,
                       timestamp: float = 0.0) -> can.Message:
-        """Fit summary; Samples and ResidualRms saturate at the DBC maximum."""
+        """Fit summary; Samples and ResidualRms saturate at the DBC maximum; a
+        ``ModelTerms`` mask wider than its signal is an error (never saturated)."""
+        msg = self._message(ref)
+        codes = self.codes(ref, "summary")
+        mask = model_terms_mask(model_terms, _width(msg, "ModelTerms"))  # names the term
+        check_width(msg, "ModelTerms", mask, f"the model {', '.join(model_terms)}")
         return self.encode(ref, {
-            "Identifier": IDENTIFIER_CODES[identifier], "Status": STATUS_CODES[status],
-            "ModelTerms": model_terms_mask(model_terms), "Samples": samples,
+            "Identifier": self._code(msg, codes["Identifier"], identifier),
+            "Status": self._code(msg, codes["Status"], status),
+            "ModelTerms": mask, "Samples": samples,
             "ResidualRms": residual_rms if math.isfinite(residual_rms) else 0.0,
         }, timestamp=timestamp)
 
@@ -181,7 +252,8 @@ class FrameEncoder:
         s = {x.name: x for x in msg.signals}
         c = counter % 16
         pages = (
-            {"Page": 0, "State": STATE_CODES[state], "Bins": _wrap(bins, s["Bins"]),
+            {"Page": 0, "State": self._code(msg, self.codes(ref, "status")["State"], state),
+             "Bins": _wrap(bins, s["Bins"]),
              "Gaps": _wrap(gaps, s["Gaps"])},
             {"Page": 1, "FramesDecoded": _wrap(decoded, s["FramesDecoded"]),
              "FramesRejected": _wrap(rejected, s["FramesRejected"])},
@@ -194,18 +266,22 @@ class FrameEncoder:
     def ack_frame(self, ref: str | MessageRef, command: int, sequence: int, ok: bool,
                   reason: str = "ok", node: int = 1, *, timestamp: float = 0.0) -> can.Message:
         """Acknowledge (``ok``) or refuse a command, echoing its Command and Sequence."""
-        data = {"Command": command, "Sequence": sequence, "Result": 0 if ok else 1,
-                "Reason": ACK_REASONS[reason]}
-        if "Node" in {x.name for x in self._message(ref).signals}:
+        msg = self._message(ref)
+        codes = self.codes(ref, "ack")
+        data = {"Command": command, "Sequence": sequence,
+                "Result": self._code(msg, codes["Result"], "ack" if ok else "nack"),
+                "Reason": self._code(msg, codes["Reason"], reason)}
+        if "Node" in {x.name for x in msg.signals}:
             data["Node"] = node
         return self.encode(ref, data, timestamp=timestamp)
 
     def command_frame(self, ref: str | MessageRef, command: str | int, sequence: int,
                       target: int = 255, *, timestamp: float = 0.0) -> can.Message:
         """A command (for tests and tools that drive a daemon)."""
+        msg = self._message(ref)
         code = command if isinstance(command, int) else \
-            {v: k for k, v in COMMANDS.items()}[command]
-        sigs = {x.name for x in self._message(ref).signals}
+            self._code(msg, self.codes(ref, "command")["Command"], command)
+        sigs = {x.name for x in msg.signals}
         data = {"Command": code, "Sequence": sequence % 256}
         if "Target" in sigs:
             data["Target"] = target

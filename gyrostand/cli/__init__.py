@@ -79,6 +79,17 @@ def _gather_globals(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; progress output is on for its duration only (an in-process call,
+    e.g. from a test or a script, leaves the library silent afterwards)."""
+    from .. import progress
+
+    try:
+        return _main(argv)
+    finally:
+        progress.configure(on=False)
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _gather_globals(args)
@@ -95,6 +106,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level
         h.setLevel(level)
     try:
+        from ..plugins import load_entry_points
+
+        load_entry_points()  # user terms (entry points gyrostand.terms) before any model
         return int(args.func(args) or 0)
     except GyrostandError as exc:
         if args.debug:

@@ -8,6 +8,7 @@ import json
 import sys
 from typing import Any
 
+from ..core import registry
 from ..core.names import LKF_VARIANTS, METHODS, VOCABULARY
 from ..errors import ConfigError
 from .common import number
@@ -50,31 +51,25 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def options_for(args: argparse.Namespace) -> dict[str, Any]:
-    opts: dict[str, Any] = {"sigma": args.sigma}
-    if args.method == "lsq":
-        opts["regressor"] = args.regressor
-    if args.method == "lkf":
-        opts["variant"] = args.variant
-        opts["iterate"] = args.iterate
-        if args.beta0 is not None:
-            opts["beta0"] = args.beta0
-        if args.gamma0 is not None:
-            opts["gamma0"] = args.gamma0
-    return opts
+def options_for(args: argparse.Namespace) -> Any:
+    """The typed options of ``--method`` from the command line: each option of the
+    identifier's options class given here under its own name (``--regressor`` for lsq;
+    ``--variant``, ``--beta0``, ``--gamma0``, ``--iterate`` for lkf; ``--sigma`` for all)."""
+    return registry.get(args.method).cli_options(args)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..core.data import Samples
-    from ..core.identify import identify
     from ..core.model import Model
 
     samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
-    if args.method == "lkf" and args.beta0 is not None and args.beta0 * samples.dt >= 1.0:
-        raise ConfigError(f"--beta0 {args.beta0:g} 1/s must be below 1/dt = "
+    opts = options_for(args)
+    beta0 = getattr(opts, "beta0", None)  # a linearisation point (lkf)
+    if beta0 is not None and beta0 * samples.dt >= 1.0:
+        raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
                           f"{1.0 / samples.dt:g} of {args.samples}")
-    result = identify(samples, model, args.method, **options_for(args))
+    result = registry.get(args.method).fit(samples, model, opts)
     if args.json:
         json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")

@@ -37,7 +37,7 @@ from .ml import ml
 from .model import Model, context
 from .prederror import ModelError, model_error
 from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
-from .terms import TERMS, VOCABULARY
+from .terms import TERMS, separation, term_class
 from .validate import prepare
 
 log = logging.getLogger(__name__)
@@ -46,38 +46,9 @@ log = logging.getLogger(__name__)
 MIN_DIAGNOSE_SAMPLES = 30
 #: ln L rise that shows the current fit was not at its maximum
 REFIT_GAIN = 0.05
-#: candidates whose null hypothesis lies on the boundary (p-value halved)
-BOUNDARY = {"random_walk"}
-#: candidates with a parameter unidentified under the null: one more df in the p-value
-NUISANCE = {"temp_lag", "markov2"}
-
-#: what temperature profile tells two look-alike effects apart
-SEPARATE = {
-    frozenset({"temp_rate", "temp_lag"}):
-        "a lag τ acts like −τ·γ·dT/dt during slow ramps; fast ramps or steps (faster than "
-        "1/τ) followed by long soaks separate them: the lag keeps acting after the ramp "
-        "ends, the rate term stops at once",
-    frozenset({"temp_rate", "hysteresis"}):
-        "both follow dT/dt; ramps of clearly different rates separate them: the rate term "
-        "scales with the ramp rate, hysteresis does not",
-    frozenset({"hysteresis", "temp_lag"}):
-        "long soaks after each ramp separate them: a lag decays during the soak, "
-        "hysteresis holds until the direction changes",
-    frozenset({"temp2", "temp_lag"}):
-        "visit the same temperatures while heating and while cooling (a symmetric cycle): "
-        "a quadratic term is the same both ways, a lag is not",
-    frozenset({"temp2", "hysteresis"}):
-        "a symmetric heating/cooling cycle over the same range separates them",
-    frozenset({"trend", "random_walk"}):
-        "a longer run or repeated cycles: a trend keeps its rate, a random walk wanders",
-    frozenset({"trend", "warmup"}):
-        "a longer record after switch-on: the warm-up settles, the trend does not",
-    frozenset({"warmup", "random_walk"}):
-        "repeat the switch-on: a warm-up repeats, a random walk does not",
-    frozenset({"markov2", "random_walk"}):
-        "a longer run: a second Gauss–Markov process levels off at its σ₂, a random walk "
-        "keeps growing",
-}
+#: the test's null hypothesis and the look-alikes are facts of each term
+#: (:attr:`~gyrostand.core.term_base.Term.null`, ``look_alikes``): see :func:`_extra_df`,
+#: :func:`_halved` and :func:`look_alikes`
 FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, steps and "
                    "long soaks, repeated")
 
@@ -174,10 +145,21 @@ class Report:
 
 
 def candidate_terms(model: Model) -> list[str]:
-    """Vocabulary terms not in ``model`` that can be added to it."""
+    """Known terms (built-in and plugins) not in ``model`` that can be added to it."""
     have = set(model.names)
-    return [t for t in VOCABULARY
+    return [t for t in TERMS
             if t not in have and all(r in have for r in TERMS[t].requires)]
+
+
+def _extra_df(term: str) -> int:
+    """One more degree of freedom for a term with a parameter not identified under the
+    null (Davies 1987): measured false alarms of ``temp_lag`` at 2 of 4 seeds without."""
+    return 1 if term_class(term).null == "nuisance" else 0
+
+
+def _halved(term: str) -> bool:
+    """The null on the boundary of the parameter space: ½χ²(0) + ½χ²(df)."""
+    return term_class(term).null == "boundary"
 
 
 def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
@@ -225,10 +207,10 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             continue
         assert base.loglik is not None and r.loglik is not None
         added = len(bigger.param_names) - len(model.param_names)
-        df = added + (1 if term in NUISANCE else 0)
+        df = added + _extra_df(term)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
         p = float(chi2.sf(lr, df))
-        if term in BOUNDARY:
+        if _halved(term):
             p *= 0.5
         new = [k for k in bigger.param_names if k not in model.param_names]
         stochastic = TERMS[term].n_states > 0
@@ -263,11 +245,10 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
         if c is best:
             continue
         if c.delta_aic - best.delta_aic < max(4.0, 0.1 * abs(best.delta_aic)):
-            pair = frozenset({best.term, c.term})
             out.append({
                 "terms": [best.term, c.term],
                 "delta_aic": [best.delta_aic, c.delta_aic],
-                "advice": SEPARATE.get(pair, FALLBACK_ADVICE),
+                "advice": separation(best.term, c.term) or FALLBACK_ADVICE,
             })
     return out
 
@@ -329,9 +310,9 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
         df_s = len(both.param_names) - len(model.add(d.term).param_names)
         lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
         lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
-        p_d = float(chi2.sf(lr_d, df_d + (1 if d.term in NUISANCE else 0)))
-        p_s = float(chi2.sf(lr_s, df_s + (1 if st.term in NUISANCE else 0)))
-        if st.term in BOUNDARY:
+        p_d = float(chi2.sf(lr_d, df_d + _extra_df(d.term)))
+        p_s = float(chi2.sf(lr_s, df_s + _extra_df(st.term)))
+        if _halved(st.term):
             p_s *= 0.5
         log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
                  d.term, st.term, p_d, st.term, d.term, p_s)

@@ -25,7 +25,7 @@ from .data import Samples
 from .kalman import kf_run, kf_smooth
 from .model import Model, context
 from .results import FitResult
-from .terms import TERMS, VOCABULARY, Context
+from .terms import TERMS, Context, term_class
 
 #: |dT/dt| below this (degC/s) is a soak: 0.05 degC/min
 SOAK_RATE = 0.05 / 60.0
@@ -116,25 +116,19 @@ def segments(ctx: Context) -> list[dict[str, Any]]:
 
 
 def candidate_regressor(term: str, ctx: Context, p: Mapping[str, float]) -> np.ndarray | None:
-    """The signature of a candidate effect in the data (before filtering), if it has one.
-
-    Output effects give their regressor; input effects their response through the drift
-    dynamics; ``temp_lag`` the change a small lag makes (−τ·response to dT/dt); the random
-    processes have no deterministic signature (they show in the autocorrelation instead).
+    """The signature of a candidate effect in the data (before filtering): the term's own
+    :meth:`~gyrostand.core.term_base.Term.signature` (output effects their regressor,
+    input effects their response through the drift dynamics, ``temp_lag`` the change a
+    small lag makes). None only where the term says so: it has no deterministic signature
+    (``no_signature``: the random processes show in the autocorrelation instead), or the
+    fitted model lacks a parameter the signature needs (``signature_needs``, e.g. no
+    ``markov.beta`` to filter an input through). An unknown term is a ModelError; a term
+    that neither has a signature nor says why not is one too, naming it.
     """
-    beta = p.get("markov.beta")
-    if term in ("temp_rate", "hysteresis", "trend"):
-        return next(iter(TERMS[term]().regressors(p, ctx).values()))
-    if term == "warmup":
-        tau = max(0.1 * (ctx.t[-1] - ctx.t[0]), 10 * ctx.dt)
-        return np.exp(-(ctx.t - ctx.t[0]) / tau)
-    if beta is None:
+    cls = term_class(term)
+    if cls.no_signature or any(k not in p for k in cls.signature_needs):
         return None
-    if term == "temp2":
-        return next(iter(TERMS[term]().regressors(p, ctx).values()))
-    if term == "temp_lag":
-        return -ctx.through_markov(ctx.temp_rate, beta)
-    return None
+    return cls().signature(p, ctx)
 
 
 @dataclass(frozen=True)
@@ -198,14 +192,15 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
     X = model.regressors(p, ctx)
     theta = np.array([p[k] for k in model.names_of_kind("linear")])
     det = X @ theta if theta.size else np.zeros(len(samples))
-    phi, qv, p0, r = model.stochastic(p, samples.dt)
+    ss = model.state_space(p, samples.dt)
+    phi, qv, p0, r = ss.phi, ss.q, ss.p0, ss.r
     w = samples.noise_weights
     sm, _ = kf_smooth(phi, qv, p0, r, w, np.ascontiguousarray(samples.drift - det))
     smoothed = samples.drift - det - sm
     fitted = samples.drift - e
     # cross-correlation with every candidate's regressor, prewhitened by the same filter
     xcorr = {}
-    for term in VOCABULARY:
+    for term in TERMS:
         if term in model.names:
             continue
         reg = candidate_regressor(term, ctx, p)

@@ -1,282 +1,52 @@
-"""The paper's linearised Kalman filter with a moving linearisation point (Algorithm 2).
+"""The paper's linearised Kalman filter with a moving linearisation point (Algorithm 2),
+over a record: the paper's single pass (optionally iterated) and the converging variant.
 
-With ε = ε₀(t) + δε, β = β₀ + δβ, γ = γ₀ + δγ, b = b₀ + δb and second-order terms dropped:
-
-    dε₀/dt = −β₀ ε₀ + γ₀ T(t)                        (the moving linearisation point)
-    dδε/dt = −β₀ δε − ε₀(t) δβ + T(t) δγ + √(2σ²β₀) w
-    Y_k − ε₀_k − b₀ = δε_k + δb + (other processes) + v_k
-
-State ``[δε, δβ, (δγ), (δγ₂), (δb), (δk), (δh), (δc), (δA), (r), (ε₂)]``: the parameter
-corrections are constant states. Input terms (``temp``, ``temp2``) enter the δε row with
-their input u(T) and drive ε₀ with their linearisation coefficient; output terms (``bias``,
-``temp_rate``, ``hysteresis``, ``trend``, ``warmup`` with τ held) enter the measurement with
-their regressor x_k (a time-varying H), which is exact since they are linear. Further random
-processes (``random_walk`` r, ``markov2`` ε₂) are stacked with their own dynamics and enter
-the measurement with coefficient 1. The linearisation point stays fixed during a pass; ε₀
-is propagated. Discretisation is exact in δε (φ₀ = e^{−β₀Δt}) with the inputs ε₀(t) and
-u(t) linear between samples.
+The filter itself, and how each model term enters it, is :mod:`.lkf_online`
+(:class:`OnlineLKF`, :func:`lkf_terms`; re-exported here); the converging filter is
+:mod:`.lkf_relin`.
 
 Noise levels (σ, σ_v, and those of the other processes) are *held*, as in the paper where
 σ is known: given by the caller, or estimated beforehand (least squares' moments when the
 model is a single process, otherwise maximum likelihood) — the result says which.
-:class:`OnlineLKF` runs sample by sample with the estimate and covariance available after
-every sample; :func:`lkf` is that same filter over a batch, optionally iterated
-(re-linearised at the previous estimate until it settles).
+:func:`lkf` runs the filter over a batch, optionally iterated (re-linearised at the
+previous estimate until it settles).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping
 
 import numpy as np
 
 from ..errors import GyrostandError, ModelError
 from .data import Samples
-from .kalman import foh_weights, kf_step
+from .lkf_online import (
+    ONLINE_RATE_WINDOW,
+    PAPER_POINT,
+    LkfTerms,
+    OnlineLKF,
+    causal_rate,
+    default_prior_std,
+    estimated_names,
+    held_names,
+    lkf_layout,
+    lkf_terms,
+)
 from .model import Model, context
 from .names import LKF_VARIANTS
 from .results import Estimate, FitResult
-from .terms import HYSTERESIS_RATE, T_REF, TERMS
 from .validate import prepare, require_samples
+
+__all__ = ["lkf", "OnlineLKF", "LkfTerms", "lkf_terms", "lkf_layout", "held_names",
+           "held_values", "estimated_names", "default_prior_std", "causal_rate",
+           "relin_fit", "PAPER_POINT", "ONLINE_RATE_WINDOW", "VARIANTS", "BETA_MAX_DT"]
 
 log = logging.getLogger(__name__)
 
-#: the paper's recommended linearisation point (MODEL.md: "of order 10^-4")
-PAPER_POINT = 1e-4
 #: the iteration's β stays below BETA_MAX_DT / Δt: a correlation time shorter than the
 #: sampling step is white noise, not a Gauss-Markov drift
 BETA_MAX_DT = 1.0
-#: input terms of the drift: the linear coefficient's state enters the δε row with the
-#: term's input u(T) (FOH), and γ₀·u drives the moving point ε₀
-INPUTS = {"temp.gamma": "temp", "temp2.gamma2": "temp2"}
-#: output terms: the coefficient's state enters the measurement with the regressor x_k
-OUTPUTS = {"bias.b": "bias", "temp_rate.k": "temp_rate", "hysteresis.h": "hysteresis",
-           "trend.c": "trend", "warmup.A": "warmup"}
-ESTIMATED = ("markov.beta", *INPUTS, *OUTPUTS)
-SUPPORTED = {"markov", "temp", "temp2", "bias", "temp_rate", "hysteresis", "trend", "warmup",
-             "white", "random_walk", "markov2"}
-#: samples of the causal dT/dt estimate of the online filter (a least-squares slope)
-ONLINE_RATE_WINDOW = 61
-
-
-def causal_rate(temps: list[float], dt: float) -> float:
-    """dT/dt (degC/s): least-squares slope of the temperatures of the last samples
-    (the online filters keep ``ONLINE_RATE_WINDOW`` of them); 0 for fewer than 3."""
-    n = len(temps)
-    if n < 3:
-        return 0.0
-    x = np.arange(n) - (n - 1) / 2
-    return float(x @ np.asarray(temps) / (x @ x) / dt)
-
-
-def lkf_layout(model: Model) -> list[str]:
-    """Names of the LKF's states, in order."""
-    if "markov" not in model:
-        raise ModelError("lkf linearises the 'markov' term's dynamics: the model needs it")
-    extra = [n for n in model.names if n not in SUPPORTED]
-    if extra:
-        raise ModelError(f"lkf does not support the term(s) {', '.join(extra)}; use ml")
-    names = ["delta_eps", "markov.beta"]
-    names += [k for k, term in INPUTS.items() if term in model]
-    names += [k for k, term in OUTPUTS.items() if term in model]
-    if "random_walk" in model:
-        names.append("random_walk")
-    if "markov2" in model:
-        names.append("markov2")
-    return names
-
-
-def held_names(model: Model) -> list[str]:
-    """Parameters the LKF holds at given values (noise levels, β₂, the warm-up's τ)."""
-    return [n for n in model.param_names if n not in ESTIMATED]
-
-
-class OnlineLKF:
-    """The LKF, one sample at a time.
-
-    Args:
-        model: the model (``markov`` required; ``temp``, ``bias``, ``random_walk``,
-            ``markov2`` optional).
-        dt: sampling step, s.
-        beta0, gamma0, b0: linearisation point.
-        held: values of the held parameters (see :func:`held_names`), e.g.
-            ``{"markov.sigma": 0.1, "white.sigma": 0.01}``.
-        prior_std: prior std of each estimated parameter's correction and of the first
-            drift discrepancy (``"delta_eps"``); by default derived from the first sample.
-    """
-
-    def __init__(self, model: Model, dt: float, *, beta0: float = PAPER_POINT,
-                 gamma0: float = PAPER_POINT, b0: float = 0.0,
-                 held: Mapping[str, float], prior_std: Mapping[str, float] | None = None,
-                 point: Mapping[str, float] | None = None):
-        self.model, self.dt = model, float(dt)
-        self.layout = lkf_layout(model)
-        missing = [n for n in held_names(model) if n not in held]
-        if missing:
-            raise ModelError(f"lkf needs value(s) for the held parameter(s) {', '.join(missing)}")
-        if not beta0 > 0:
-            raise ModelError(f"lkf linearisation point beta0 must be > 0, got {beta0}")
-        self.beta0 = float(beta0)
-        self.gamma0 = float(gamma0) if "temp" in model else 0.0
-        self.b0 = float(b0) if "bias" in model else 0.0
-        # linearisation point of every estimated coefficient (beyond β₀, γ₀, b₀: 0)
-        self.point = {k: 0.0 for k in self.layout if k in ESTIMATED}
-        self.point.update({k: float(v) for k, v in (point or {}).items() if k in self.point})
-        self.point.update({"markov.beta": self.beta0})
-        if "temp.gamma" in self.point:
-            self.point["temp.gamma"] = self.gamma0
-        if "bias.b" in self.point:
-            self.point["bias.b"] = self.b0
-        self._inputs = [(self.layout.index(k), k) for k in INPUTS if k in self.point]
-        self._outputs = [(self.layout.index(k), k) for k in OUTPUTS if k in self.point]
-        self._u_prev: dict[str, float] = {}
-        self._calls = 0
-        self._Tbuf: list[float] = []
-        self.held = {k: float(held[k]) for k in held_names(model)}
-        self.prior_std = dict(prior_std or {})
-        n = len(self.layout)
-        self.phi0, self.a0, self.a1 = foh_weights(self.beta0, self.dt)
-        self.A = np.eye(n)
-        self.A[0, 0] = self.phi0
-        self.Qd = np.zeros(n)
-        sig = self.held["markov.sigma"]
-        self.Qd[0] = sig * sig * -math.expm1(-2 * self.beta0 * self.dt)
-        self.H = np.zeros(n)
-        self.H[0] = 1.0
-        for i, name in enumerate(self.layout):
-            if name == "random_walk":
-                self.H[i] = 1.0
-                self.Qd[i] = self.held["random_walk.q"] ** 2 * self.dt
-            elif name == "markov2":
-                self.H[i] = 1.0
-                b2, s2 = self.held["markov2.beta"], self.held["markov2.sigma"]
-                self.A[i, i] = math.exp(-b2 * self.dt)
-                self.Qd[i] = s2 * s2 * -math.expm1(-2 * b2 * self.dt)
-        self.r = self.held["white.sigma"] ** 2
-        self.x = np.zeros(n)
-        self.P = np.zeros((n, n))
-        self.k = 0
-        self._no_predict = np.zeros((0, 0))
-        self._eps0 = 0.0
-        self._T = 0.0
-
-    @staticmethod
-    def default_prior_std(model: Model, dt: float, y0: float, T0: float,
-                          y_scale: float, T_scale: float) -> dict[str, float]:
-        """Uninformative priors on the scale of the data.
-
-        β ≤ 1/Δt; |γ| ≲ β|ε|/|T| (from the steady state γT = βε); |b| ≲ |y|.
-        """
-        ys = abs(y0) + y_scale
-        Ts = max(abs(T0), T_scale, 1e-6)
-        return {
-            "markov.beta": 1.0 / dt,
-            "temp.gamma": ys / (dt * Ts),
-            "temp2.gamma2": ys / (dt * Ts * Ts),
-            "bias.b": 10 * ys,
-            "temp_rate.k": 10 * ys * 600.0,   # |k| dT/dt ≲ |y| at 0.1 degC/min
-            "hysteresis.h": 10 * ys,
-            "trend.c": 10 * ys / 3600.0,        # ≲ |y| per hour
-            "warmup.A": 10 * ys,
-        }
-
-    def _start(self, y: float, T: float) -> None:
-        n = len(self.layout)
-        # the moving point starts at the first measurement (less the output terms' part)
-        self._eps0 = y - sum(self.point[k] * self._regressor(k, T) for _, k in self._outputs)
-        self._T = T
-        ps = self.prior_std or self.default_prior_std(
-            self.model, self.dt, y, T, self.held["markov.sigma"], 1.0)
-        sig = self.held["markov.sigma"]
-        P = np.zeros((n, n))
-        P[0, 0] = ps.get("delta_eps", math.sqrt(sig * sig + self.r)) ** 2
-        for i, name in enumerate(self.layout[1:], start=1):
-            if name in ESTIMATED:
-                P[i, i] = ps[name] ** 2
-            elif name == "markov2":
-                P[i, i] = self.held["markov2.sigma"] ** 2
-        self.P = P
-
-    def _input(self, key: str, T: float) -> float:
-        """The input u(T) of an input term: T for temp, (T − T_ref)² for temp2."""
-        return T if key == "temp.gamma" else (T - T_REF) ** 2
-
-    def _regressor(self, key: str, T: float) -> float:
-        """Regressor of an output term at this sample, computed causally (online use)."""
-        t = (self._calls - 1) * self.dt
-        if key == "bias.b":
-            return 1.0
-        if key == "trend.c":
-            return t
-        if key == "warmup.A":
-            return math.exp(-t / self.held["warmup.tau"])
-        rate = self._causal_rate()
-        return rate if key == "temp_rate.k" else math.tanh(rate / HYSTERESIS_RATE)
-
-    def _causal_rate(self) -> float:
-        return causal_rate(self._Tbuf, self.dt)
-
-    def update(self, y: float, T: float,
-               regressors: Mapping[str, float] | None = None) -> tuple[float, float]:
-        """Process one sample: drift ``y`` (NaN = gap, predict only), temperature ``T``.
-
-        ``regressors`` (optional) gives the output terms' regressor values at this sample
-        by parameter name (the batch filter passes the same centred dT/dt as ML); those not
-        given are computed causally. Returns the innovation and its variance (NaN for a gap).
-        """
-        self._calls += 1
-        self._Tbuf.append(T)
-        if len(self._Tbuf) > ONLINE_RATE_WINDOW:
-            del self._Tbuf[0]
-        if self.k == 0:
-            if math.isnan(y):
-                return math.nan, math.nan  # the filter starts at the first measured sample
-            self._start(y, T)
-            for _, key in self._inputs:
-                self._u_prev[key] = self._input(key, T)
-            A = self._no_predict
-        else:
-            eps_prev = self._eps0
-            drive = 0.0
-            for i, key in self._inputs:
-                uk = self._input(key, T)
-                u = self.a0 * self._u_prev[key] + self.a1 * uk
-                self._u_prev[key] = uk
-                drive += self.point[key] * u
-                self.A[0, i] = u  # ∫u δθ (FOH weights a0, a1)
-            self._eps0 = self.phi0 * eps_prev + drive
-            # row of δε: φ₀ δε − ∫ε₀ δβ + Σ ∫u_j δθ_j
-            self.A[0, 1] = -(self.a0 * eps_prev + self.a1 * self._eps0)
-            self._T = T
-            A = self.A
-        self.k += 1
-        z = y - self._eps0
-        for i, key in self._outputs:
-            x = (regressors or {}).get(key)
-            if x is None:
-                x = self._regressor(key, T)
-            self.H[i] = x
-            z -= self.point[key] * x
-        e, f = kf_step(self.x, self.P, A, self.Qd, self.H, self.r, z)
-        return float(e), float(f)
-
-    @property
-    def estimates(self) -> dict[str, tuple[float, float]]:
-        """Current ``name -> (value, std)`` of the estimated parameters."""
-        return {name: (self.point[name] + float(self.x[i]),
-                       float(math.sqrt(max(self.P[i, i], 0.0))))
-                for i, name in enumerate(self.layout) if name in ESTIMATED}
-
-    @property
-    def drift(self) -> float:
-        """Current filtered drift ε̂ = ε₀ + δε (without bias)."""
-        return self._eps0 + float(self.x[0])
-
-    @property
-    def covariance(self) -> np.ndarray:
-        return self.P.copy()
 
 
 def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> tuple[dict, str]:
@@ -358,13 +128,12 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
     ps = dict(prior_std) if prior_std else OnlineLKF.default_prior_std(
         model, samples.dt, float(y[first]), float(samples.temp[0]),
         float(np.nanstd(y)) + hv["markov.sigma"], float(np.std(samples.temp)))
-    keys = [k for k in ESTIMATED if k in layout]
+    keys = list(lkf_terms(model).estimated)
     state = {"passes": 0}
 
     # the output terms' regressors as ML sees them (centred dT/dt, time from the start)
     ctx = context(samples)
-    regs = {k: TERMS[term]().regressors(hv, ctx)[k] for k, term in OUTPUTS.items()
-            if term in model}
+    regs = {k: term.regressors(hv, ctx)[k] for k, term in lkf_terms(model).outputs}
 
     def one_pass(pt: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
         """g(point): the estimate (and its std) of one LKF pass linearised at ``pt``."""
@@ -419,7 +188,7 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
             params[n] = Estimate(est[n][0], est[n][1], model.unit(n))
         else:
             params[n] = Estimate(hv[n], 0.0, model.unit(n), fixed=True)
-    names = [n for n in layout if n in ESTIMATED]
+    names = [n for n in layout if n in keys]
     idx = [layout.index(n) for n in names]
     return FitResult(
         method="lkf", model=model, parameters=params, loglik=None, residuals=run["e"],
@@ -485,7 +254,7 @@ def _run(f: OnlineLKF, samples: Samples, regs: Mapping[str, np.ndarray]) -> dict
     N = len(samples)
     e = np.empty(N)
     fv = np.empty(N)
-    est_names = [n for n in f.layout if n in ESTIMATED]
+    est_names = [n for n in f.layout if n in f.estimated]
     hist = {n: np.empty(N) for n in est_names}
     hist.update({n + ":std": np.empty(N) for n in est_names})
     hist["drift"] = np.empty(N)
@@ -574,8 +343,9 @@ def _relin_regressors(samples: Samples, model: Model, hv: Mapping[str, float], f
         return None
     ctx = context(samples)
     cols = {}
-    for k in f.outputs:
-        cols.update(TERMS[OUTPUTS[k]]().regressors(hv, ctx))
+    for k, term in f.output_terms:
+        if k not in cols:
+            cols.update(term.regressors(hv, ctx))
     return np.column_stack([cols[k] for k in f.outputs])
 
 

@@ -32,14 +32,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from ..errors import ModelError
-from .kalman import NO_WEIGHTS, foh_weights, kf_run
-from .lkf import _fixed_point, causal_rate
-from .lkf_kernel import gm_profile, lkf_pass
+from .kalman import foh_weights
+from .lkf import _fixed_point
+from .lkf_kernel import lkf_pass
+from .lkf_noise import BOUND_STEP as BOUND_STEP  # re-exported (moved to lkf_noise)
+from .lkf_noise import NOISE_STEP as NOISE_STEP
+from .lkf_noise import RATIO_BOUNDS as RATIO_BOUNDS
+from .lkf_noise import inflation, reestimate
+from .lkf_online import ONLINE_RATE_WINDOW, causal_rate, default_prior_std, lkf_terms
 from .model import Model
-from .terms import HYSTERESIS_RATE, T_REF, TERMS, Context
+from .term_base import Bin, Context, Scales, Term
 
 log = logging.getLogger(__name__)
 
@@ -50,38 +54,22 @@ BETA_MAX_DT = 1.0
 #: ONLINE_SETTLE_SIGMA: the next one, ``relinearize_every`` bins later, goes on from there
 SETTLE_SIGMA = 1e-3
 ONLINE_SETTLE_SIGMA = 2e-2
-#: bounds of the searched noise ratio σ_v/σ
-RATIO_BOUNDS = (1e-3, 1e2)
-#: step in the log noise parameter for its curvature and the estimate's sensitivity
-NOISE_STEP = 0.1
-#: a noise level searched to a bound of its range: moved this far (log) into it for the
-#: estimate's sensitivity
-BOUND_STEP = 4.0
-#: input terms (state enters the δε row with u(T); θ₀ drives ε₀) and output terms (state
-#: enters the measurement with the regressor x_k)
-INPUTS = {"temp.gamma": "temp", "temp2.gamma2": "temp2"}
-OUTPUTS = {"bias.b": "bias", "temp_rate.k": "temp_rate", "hysteresis.h": "hysteresis",
-           "trend.c": "trend", "warmup.A": "warmup"}
-EXTRA = ("random_walk", "markov2")
-#: terms the filter represents
-SUPPORTED = {"markov", "temp", "temp2", "bias", "temp_rate", "hysteresis", "trend", "warmup",
-             "white", "random_walk", "markov2"}
-
-
-#: the bias enters as an input of the drift: y = ε + b with dε/dt = −βε + γT is, for
-#: ε' = ε + b, dε'/dt = −βε' + γT + βb: the coefficient c = βb of the input u ≡ 1. The
-#: δβ column then runs along the filtered *measured* level ε̂', which the data pin down; as
-#: an output state δb is confounded with δε's level, and the dropped δβ·δε term biases β
-#: (measured: β −30 % with a 4× too small std on a 6-h chamber record)
+#: a constant output term (``constant``: the bias) enters as an input of the drift:
+#: y = ε + b with dε/dt = −βε + γT is, for ε' = ε + b, dε'/dt = −βε' + γT + βb: the
+#: coefficient c = βb of the input u ≡ 1 (named ``<term>.beta_<param>``, e.g.
+#: ``bias.beta_b``). The δβ column then runs along the filtered *measured* level ε̂', which
+#: the data pin down; as an output state δb is confounded with δε's level, and the dropped
+#: δβ·δε term biases β (measured: β −30 % with a 4× too small std on a 6-h chamber record)
 BIAS_RATE = "bias.beta_b"
 
 
-def _input(key: str, T: np.ndarray | float):
-    """The input u(T) of an input term: T for temp, (T − T_ref)² for temp2, 1 for the
-    bias (as c = βb)."""
-    if key == BIAS_RATE:
-        return np.ones_like(T) if isinstance(T, np.ndarray) else 1.0
-    return T if key == "temp.gamma" else (T - T_REF) ** 2
+def _offset(model: Model) -> tuple[Term, str, str] | None:
+    """The constant output term entered as c = βb: ``(term, internal name, parameter)``."""
+    for t in model.terms:
+        if t.constant and t.role == "output" and len(t.linear) == 1:
+            lin = t.linear[0]
+            return t, f"{t.name}.beta_{lin.split('.', 1)[1]}", lin
+    return None
 
 
 @dataclass(frozen=True)
@@ -102,7 +90,7 @@ class RelinLKF:
     """The converging LKF, one bin at a time, with the record kept for re-filtering.
 
     Args:
-        model: the model (``markov`` required; see :data:`SUPPORTED`).
+        model: the model (``markov`` required; the terms :func:`~.lkf_online.lkf_terms` takes).
         dt: bin width, s.
         point: start linearisation point: ``markov.beta`` (> 0) and any linear
             coefficient (others start at 0).
@@ -120,21 +108,25 @@ class RelinLKF:
                  held: Mapping[str, float], fixed: tuple[str, ...] = (),
                  relinearize_every: int = 100, soaked: bool = True, feedback: bool = True,
                  prior_std: Mapping[str, float] | None = None, max_passes: int = 30):
-        if "markov" not in model:
-            raise ModelError("lkf linearises the 'markov' term's dynamics: the model needs it")
-        extra = [n for n in model.names if n not in SUPPORTED]
-        if extra:
-            raise ModelError(f"lkf does not support the term(s) {', '.join(extra)}; use ml")
+        terms = lkf_terms(model)  # a ModelError naming any term the filter cannot represent
         self.model, self.dt = model, float(dt)
-        self.inputs = [k for k, t in INPUTS.items() if t in model]
-        if "bias" in model:
-            self.inputs.append(BIAS_RATE)
-        self.outputs = [k for k, t in OUTPUTS.items() if t in model and k != "bias.b"]
-        self.extras = [t for t in EXTRA if t in model]
+        off = _offset(model)
+        offset = off[0] if off else None
+        self._offset_key: str | None = off[1] if off else None
+        self.inputs = [k for k, _ in terms.inputs]
+        #: the input term of each input (None: the constant output's u ≡ 1)
+        self._in_terms: list[Term | None] = [t for _, t in terms.inputs]
+        if off is not None:
+            self.inputs.append(off[1])
+            self._in_terms.append(None)
+        self.output_terms = [(k, t) for k, t in terms.outputs if t is not offset]
+        self.outputs = [k for k, _ in self.output_terms]
+        self._extra_terms = terms.extras
+        self.extras = [t.name for t in terms.extras]
         self.names = ["markov.beta", *self.inputs, *self.outputs]
         self.layout = ["delta_eps", *self.names, *self.extras]
         self.held = {k: float(v) for k, v in held.items()}
-        self.params = ["bias.b" if n == BIAS_RATE else n for n in self.names]
+        self.params = [off[2] if off and n == off[1] else n for n in self.names]
         need = [n for n in model.param_names if n not in self.params and n not in self.held]
         if need:
             raise ModelError(f"lkf needs value(s) for the held parameter(s) {', '.join(need)}")
@@ -145,8 +137,8 @@ class RelinLKF:
         self.beta_max = BETA_MAX_DT / self.dt
         self.point = np.array([float(point.get(n, 0.0)) for n in self.params])
         self.point[0] = min(beta, self.beta_max)
-        if BIAS_RATE in self.names:
-            self.point[self.names.index(BIAS_RATE)] *= self.point[0]
+        if self._offset_key is not None:
+            self.point[self.names.index(self._offset_key)] *= self.point[0]
         self.every = int(relinearize_every)
         self.soaked, self.feedback = bool(soaked), bool(feedback)
         self.prior_std = dict(prior_std or {})
@@ -189,28 +181,21 @@ class RelinLKF:
             sig = self.held["markov.sigma"]
             self.q0 = sig * sig * -math.expm1(-2.0 * b0 * self.dt)
         self.r = self.held["white.sigma"] ** 2
-        phix, qx = [], []
-        for t in self.extras:
-            if t == "random_walk":
-                phix.append(1.0)
-                qx.append(self.held["random_walk.q"] ** 2 * self.dt)
-            else:
-                b2, s2 = self.held["markov2.beta"], self.held["markov2.sigma"]
-                phix.append(math.exp(-b2 * self.dt))
-                qx.append(s2 * s2 * -math.expm1(-2.0 * b2 * self.dt))
-        self.phix = np.array(phix, dtype=float)
-        self.qx = np.array(qx, dtype=float)
+        # the further processes' own dynamics (phi, q, p0), from their terms
+        st = [s for t in self._extra_terms for s in t.states(self.held, self.dt)]
+        self.phix = np.array([s[0] for s in st], dtype=float)
+        self.qx = np.array([s[1] for s in st], dtype=float)
+        self.p0x = np.array([s[2] for s in st], dtype=float)
 
     def _prior_std(self, y0: float) -> dict[str, float]:
         """Uninformative priors on the scale of the data and of the point."""
         ps = {"delta_eps": math.sqrt(self.held["markov.sigma"] ** 2 + self.r)}
         ys = abs(y0) + self.held["markov.sigma"]
         Ts = max(float(np.max(np.abs(self._T[: max(self.n, 1)]))), 1.0)
-        scale = {"markov.beta": self.beta_max, "temp.gamma": ys * self.beta_max / Ts,
-                 "temp2.gamma2": ys * self.beta_max / (Ts * Ts), "bias.b": 10 * ys,
-                 "temp_rate.k": 10 * ys * 600.0, "hysteresis.h": 10 * ys,
-                 "trend.c": 10 * ys / 3600.0, "warmup.A": 10 * ys,
-                 BIAS_RATE: 10 * ys * self.beta_max}
+        scale = default_prior_std(self.model, Scales(y=ys, T=Ts, rate=self.beta_max))
+        if self._offset_key is not None:  # c = βb: b's scale times β's
+            scale[self._offset_key] = scale[self.params[self.names.index(
+                self._offset_key)]] * self.beta_max
         for i, name in enumerate(self.names):
             ps[name] = min(scale[name], 10.0 * abs(float(self.point[i])) + 1e-3 * scale[name])
         ps.update(self.prior_std)
@@ -224,17 +209,17 @@ class RelinLKF:
         P = np.zeros((n, n))
         for i, name in enumerate(self.names, start=1):
             P[i, i] = ps[name] ** 2
-        for i, t in enumerate(self.extras, start=1 + len(self.names)):
-            P[i, i] = 0.0 if t == "random_walk" else self.held["markov2.sigma"] ** 2
+        for i, p0 in enumerate(self.p0x, start=1 + len(self.names)):
+            P[i, i] = p0
         b0 = float(self.point[0])
         if self.soaked:
             # ε(0) = Σθ_j u_j(T₀)/β + s, s ~ N(0, σ²): linearised, δε(0) = J δθ + s
-            eps0 = sum(float(self.point[1 + j]) * _input(k, T0)
-                       for j, k in enumerate(self.inputs)) / b0
+            eps0 = sum(float(self.point[1 + j]) * self._u(j, T0)
+                       for j in range(len(self.inputs))) / b0
             J = np.zeros(n)
             J[1] = -eps0 / b0
-            for j, k in enumerate(self.inputs):
-                J[2 + j] = _input(k, T0) / b0
+            for j in range(len(self.inputs)):
+                J[2 + j] = self._u(j, T0) / b0
             P[0, 0] = self.held["markov.sigma"] ** 2
             P = _soaked_prior(P, J)
         else:
@@ -259,23 +244,22 @@ class RelinLKF:
             b[: self.n] = a[: self.n]
             setattr(self, name, b)
 
+    def _u(self, j: int, T: np.ndarray | float):
+        """The input u_j(T) of input ``j``: its term's, or 1 for the constant output."""
+        term = self._in_terms[j]
+        if term is None:
+            return np.ones_like(T) if isinstance(T, np.ndarray) else 1.0
+        return term.input(T)
+
     def _causal_regressors(self, T: float) -> np.ndarray:
-        """Output regressors at the newest bin from past bins only (online)."""
-        out = np.empty(len(self.outputs))
-        t = (self.n - 1) * self.dt
-        rate = math.nan
-        for j, key in enumerate(self.outputs):
-            if key == "bias.b":
-                out[j] = 1.0
-            elif key == "trend.c":
-                out[j] = t
-            elif key == "warmup.A":
-                out[j] = math.exp(-t / self.held["warmup.tau"])
-            else:
-                if math.isnan(rate):
-                    rate = self._causal_rate()
-                out[j] = rate if key == "temp_rate.k" else math.tanh(rate / HYSTERESIS_RATE)
-        return out
+        """Output regressors at the newest bin from past bins only (online): each term's
+        :meth:`~gyrostand.core.term_base.Term.causal_regressors`."""
+        now = Bin((self.n - 1) * self.dt, T, self._causal_rate)
+        vals: dict[str, float] = {}
+        for key, term in self.output_terms:
+            if key not in vals:
+                vals.update(term.causal_regressors(self.held, now))
+        return np.array([vals[k] for k in self.outputs], dtype=float)
 
     def _causal_rate(self) -> float:
         return causal_rate(self._Tbuf, self.dt)
@@ -305,13 +289,13 @@ class RelinLKF:
         k = self.n
         self._y[k], self._T[k] = y, T
         self._Tbuf.append(T)
-        if len(self._Tbuf) > 61:
+        if len(self._Tbuf) > ONLINE_RATE_WINDOW:
             del self._Tbuf[0]
         self.n += 1
         if self.outputs:
             self._X[k] = self._causal_regressors(T) if regressors is None else regressors
-        for j, key in enumerate(self.inputs):
-            self._Uin[k, j] = _input(key, T)
+        for j in range(len(self.inputs)):
+            self._Uin[k, j] = self._u(j, T)
         if k == 0:
             self._start()
         self._pass(k, k + 1, self._Uin)
@@ -333,8 +317,7 @@ class RelinLKF:
         ctx = self._context()
         if self.outputs:
             p = {**self.held, **self._model_point()}
-            for j, key in enumerate(self.outputs):
-                term = TERMS[OUTPUTS[key]]()
+            for j, (key, term) in enumerate(self.output_terms):
                 self._X[:n, j] = term.regressors(p, ctx)[key]
         U = self._U()
         self.point = self._clip(before, self.point)
@@ -380,153 +363,13 @@ class RelinLKF:
         return new
 
     def _noise_inflation(self, n: int, U: np.ndarray) -> None:
-        """The held noise levels are estimates: add their share to the covariance of the
-        estimate by the delta method, ``C += (∂θ̂/∂z)(∂θ̂/∂z)' var ẑ`` with z the searched
-        log noise parameter, ``var ẑ`` from the curvature of its profile likelihood and
-        ``∂θ̂/∂z`` from one more pass with z moved by ``h`` (then the state is restored)."""
-        self._infl = np.zeros((len(self.names),) * 2)
-        if self._noise is None:
-            return
-        apply, z, var_z, h, at_bound = self._noise
-
-        saved = (self.x.copy(), self.P.copy(), self._st.copy(), self._E[:n].copy(),
-                 self._F[:n].copy(), dict(self.held), self._qd)
-        v0 = self.values.copy()
-        apply(z + h)
-        self._configure()
-        self._start()
-        self._pass(0, n, U)
-        dv = (self.values - v0) / h
-        k = len(self.names)
-        extra = self.P[1: 1 + k, 1: 1 + k] - saved[1][1: 1 + k, 1: 1 + k]
-        self.x, self.P, self._st = saved[0], saved[1], saved[2]
-        self._E[:n], self._F[:n] = saved[3], saved[4]
-        self.held, self._qd = saved[5], saved[6]
-        self._configure()
-        if np.all(np.isfinite(dv)):
-            self._infl = np.outer(dv, dv) * var_z
-            if at_bound and np.all(np.diag(extra) > 0):
-                # ... and at a bound (the level not estimated), the wider band of the
-                # level moved into its range (inside it, that term averages out)
-                self._infl += extra
+        """The held noise levels' share of the covariance (:func:`.lkf_noise.inflation`)."""
+        inflation(self, n, U)
 
     def _reestimate_noise(self, ctx: Context) -> None:
-        """The held noise levels not fixed by the caller, at the current point."""
-        self._noise = None
-        free = [k for k in ("markov.sigma", "white.sigma") if k not in self.fixed]
-        if not free or self.n < 10:
-            return
-        p = {**self.held, **self._model_point()}
-        X = self.model.regressors(p, ctx)
-        lin = self.model.names_of_kind("linear")
-        theta = np.array([p[k] for k in lin])
-        d = self._y[: self.n] - (X @ theta if theta.size else 0.0)
-        D = np.ascontiguousarray(d[:, None])
-        sig0 = self.held["markov.sigma"]
-        others = {k: v / sig0 for k, v in self.held.items()
-                  if self.model.kind(k) == "std" and k not in ("markov.sigma", "white.sigma")}
-
-        single = self.model.n_states == 1
-        memo: dict[tuple[float, bool], tuple[float, float]] = {}
-
-        def nll(z: float, scale_free: bool) -> tuple[float, float]:
-            """−ln L at ln ratio z (σ = 1 when the scale is concentrated), and s²."""
-            if (z, scale_free) in memo:
-                return memo[z, scale_free]
-            q = dict(p)
-            if scale_free:
-                q["markov.sigma"], q["white.sigma"] = 1.0, math.exp(z)
-                for k, v in others.items():
-                    q[k] = v
-            elif "markov.sigma" in free:
-                q["markov.sigma"] = math.exp(z)
-            else:
-                q["white.sigma"] = math.exp(z)
-            phi, qq, p0, r = self.model.stochastic(q, self.dt)
-            if single:  # markov + white: the scalar filter
-                g, slogf, nobs = gm_profile(d, phi[0], qq[0], r, p0[0])
-            else:
-                G, slogf, nobs = kf_run(phi, qq, p0, r, NO_WEIGHTS, D, False)[2:]
-                g = float(G[0, 0])
-            out = (math.inf, 1.0)
-            if np.isfinite(slogf) and nobs > 0:
-                if scale_free:
-                    out = 0.5 * (nobs * math.log(g / nobs) + slogf), g / nobs
-                else:
-                    out = 0.5 * (g + slogf), 1.0
-            memo[z, scale_free] = out
-            return out
-
-        def brent(a: float, b: float, scale_free: bool) -> float:
-            res = minimize_scalar(lambda z: nll(z, scale_free)[0], bounds=(a, b),
-                                  method="bounded", options={"xatol": 0.02})
-            return float(res.x)
-
-        def search(z0: float, lo: float, hi: float, scale_free: bool) -> float:
-            """Bounded Brent in a bracket of ±1.5 around ``z0``; when the minimum sits at
-            the edge of the bracket or near a bound of [lo, hi] (the profile can have a
-            second minimum where one noise level vanishes), a coarse grid over [lo, hi]
-            picks the bracket again."""
-            z = brent(max(lo, z0 - 1.5), min(hi, z0 + 1.5), scale_free)
-            near = min(z - lo, hi - z) < 0.5 or abs(z - z0) > 1.45
-            if near:
-                grid = np.linspace(lo, hi, 9)
-                best = float(grid[int(np.argmin([nll(float(g), scale_free)[0]
-                                                 for g in grid]))])
-                if nll(best, scale_free)[0] < nll(z, scale_free)[0]:
-                    z = brent(max(lo, best - 1.5), min(hi, best + 1.5), scale_free)
-            return z if nll(z, scale_free)[0] <= nll(z0, scale_free)[0] else z0
-
-        b0 = float(self.point[0])
-        if len(free) == 2:
-            lo, hi = math.log(RATIO_BOUNDS[0]), math.log(RATIO_BOUNDS[1])
-            z0 = math.log(min(max(self.held["white.sigma"] / sig0, RATIO_BOUNDS[0]),
-                              RATIO_BOUNDS[1]))
-            z = search(z0, lo, hi, True)
-            scale_free = True
-
-            def apply(z: float) -> None:
-                s = math.sqrt(nll(z, True)[1])
-                self.held["markov.sigma"] = s
-                self.held["white.sigma"] = s * math.exp(z)
-                for k, v in others.items():
-                    self.held[k] = s * v
-                self._qd = s * s * -math.expm1(-2.0 * b0 * self.dt)
-        else:
-            ref = self.held[free[0]] if self.held[free[0]] > 0 else sig0
-            z0 = math.log(max(ref, 1e-12))
-            lo, hi = z0 - 8.0, z0 + 8.0
-            z = search(z0, lo, hi, False)
-            scale_free = False
-
-            def apply(z: float) -> None:
-                self.held[free[0]] = math.exp(z)
-                if free[0] == "markov.sigma":
-                    self._qd = math.exp(2 * z) * -math.expm1(-2.0 * b0 * self.dt)
-        apply(z)
-        # var ẑ from the curvature of −ln L (a flat profile: the full search range)
-        c = (nll(z + NOISE_STEP, scale_free)[0] - 2 * nll(z, scale_free)[0]
-             + nll(z - NOISE_STEP, scale_free)[0]) / NOISE_STEP ** 2
-        span = (hi - lo) / 2
-        var_z = min(1.0 / c, span * span) if c > 0 else span * span
-        # the sensitivity pass moves the drift's noise up by one std of ẑ (σ larger:
-        # z = ln σ_v/σ down, or ln σ up): a finite difference over the plausible range
-        up = -1.0 if scale_free or free[0] == "white.sigma" else 1.0
-        h = up * min(max(math.sqrt(var_z), NOISE_STEP), BOUND_STEP)
-        at_bound = hi - z < 0.05 if scale_free else (z - lo < 0.05 or hi - z < 0.05)
-        if scale_free and z - lo < 0.05:
-            # σ_v/σ at its lower bound: σ_v ≈ 0, the data are smooth; the ratio's direction
-            # does not move the estimate and σ (the scale) is concentrated
-            self._noise = None
-            return
-        if at_bound:
-            # at a bound of its search the level is not estimated: the estimate's share is
-            # its change when the level moves by BOUND_STEP into the range (var ẑ = step²)
-            h = BOUND_STEP if z - lo < 0.05 else -BOUND_STEP
-            var_z = h * h
-        if not lo <= z + h <= hi:
-            h = -h
-        self._noise = (apply, z, var_z, h, at_bound)
+        """The held noise levels not fixed by the caller, at the current point
+        (:func:`.lkf_noise.reestimate`)."""
+        reestimate(self, ctx)
 
     # ---- results ------------------------------------------------------------------------
     @property
@@ -545,9 +388,9 @@ class RelinLKF:
     def to_model(self, v: np.ndarray, C: np.ndarray | None = None):
         """Internal values ``v`` (and covariance ``C``) to model parameters: b = c/β, with
         the Jacobian for the covariance."""
-        if BIAS_RATE not in self.names:
+        if self._offset_key is None:
             return v, C
-        i = self.names.index(BIAS_RATE)
+        i = self.names.index(self._offset_key)
         out = v.copy()
         out[i] = v[i] / v[0]
         if C is None:

@@ -30,7 +30,7 @@ SUPPORTED = {"markov", "temp", "bias", "white"}
 def check_lsq_model(model: Model) -> None:
     """Raise :class:`ModelError` for a model least squares cannot represent."""
     extra = [n for n in model.names if n not in SUPPORTED]
-    procs = [n for n in model.names if n in ("markov", "random_walk", "markov2")]
+    procs = [t.name for t in model.terms if t.role == "process"]
     if len(procs) > 1:
         raise ModelError(
             f"lsq cannot represent a sum of random processes ({' + '.join(procs)}): least "

@@ -33,6 +33,9 @@ from threadpoolctl import threadpool_limits
 from ..errors import IdentificationError, ModelError
 from .data import Samples
 from .kalman import kf_run
+from .ml_cov import covariance_from_hessian as covariance_from_hessian  # re-exported
+from .ml_cov import hessian as hessian
+from .ml_cov import observed_covariance
 from .model import LOG_2PI, Model, context
 from .results import Estimate, FitResult
 from .validate import prepare, require_samples
@@ -125,11 +128,11 @@ class _Problem:
         """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
         the innovations, Σ ln f, and the number of observed samples."""
         X = self.model.regressors(p, self.ctx)
-        phi, q, p0, r = self.model.stochastic(p, self.samples.dt)
+        ss = self.model.state_space(p, self.samples.dt)
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
         Y[:, 1:] = X
-        _, _, G, slogf, n = kf_run(phi, q, p0, r, self.weights, Y, False)
+        _, _, G, slogf, n = kf_run(ss.phi, ss.q, ss.p0, ss.r, self.weights, Y, False)
         return G, slogf, n
 
     def profile(self, z: np.ndarray):
@@ -191,29 +194,22 @@ class _Problem:
         return p, A / s2, ll
 
 
-def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
-    """Candidate start points: LSQ-seeded β and a few noise ratios per free parameter."""
+def _start_grid(prob: _Problem, seeds: Mapping[str, float | None]) -> list[np.ndarray]:
+    """Candidate start points: each term's start values of its searched parameters
+    (:meth:`~gyrostand.core.term_base.Term.start_values`; noise levels as ratios), and
+    around each seed value (least squares' β) a factor 3 either way."""
     axes = []
     dur, dt = prob.duration, prob.samples.dt
+    model = prob.model
+    params = dict(model.params)
     for n in prob.rates:
-        if n == "markov.beta":
-            # least squares' β seeds the grid, but with measurement noise it is biased by
-            # orders of magnitude (errors in variables): a wide geometric axis as well
-            vals = list(np.geomspace(2.0 / dur, 0.5 / dt, 5))
-            if beta0 is not None:
-                vals += [beta0, beta0 * 3, beta0 / 3]
-        elif prob.model.kind(n) == "time":
-            vals = list(np.geomspace(10 * dt, dur / 3, 4))
-        else:
-            vals = list(np.geomspace(3.0 / dur, 0.3 / dt, 4))
+        vals = model.term_of(n).start_values(params[n], dur, dt)
+        seed = seeds.get(n)
+        if seed is not None:
+            vals += [seed, seed * 3, seed / 3]
         axes.append([np.log(v) for v in vals])
     for n in prob.stds:
-        if n == "white.sigma":
-            rel = [1e-3, 0.03, 0.3, 1.0]
-        elif n == "random_walk.q":
-            rel = [0.03 / np.sqrt(dur), 0.3 / np.sqrt(dur), 3 / np.sqrt(dur)]
-        else:
-            rel = [0.3, 3.0]
+        rel = model.term_of(n).start_values(params[n], dur, dt)
         axes.append([np.log(v * prob.ref_scale) for v in rel])
     pts = [np.array(c) for c in itertools.product(*axes)]
     if len(pts) > 150:
@@ -225,12 +221,12 @@ def _start_grid(prob: _Problem, beta0: float | None) -> list[np.ndarray]:
 
 
 def _lsq_beta(samples: Samples, model: Model) -> float | None:
-    """β from least squares on the single-process part of the model (a start value)."""
-    from .lsq import lsq
+    """β from least squares on the part of the model it represents (a start value)."""
+    from .lsq import SUPPORTED, lsq
 
     if "markov" not in model:
         return None
-    base = Model.parse([n for n in model.names if n in ("markov", "temp", "bias")])
+    base = Model.parse([n for n in model.names if n in SUPPORTED and n != "white"])
     try:
         b = lsq(samples, base).value("markov.beta")
     except Exception:  # noqa: BLE001 - a start value only; ML goes on with its grid
@@ -250,53 +246,6 @@ def _newton_gain(res, n: int) -> float:
     except Exception:  # noqa: BLE001 - no curvature model: be conservative
         return np.inf
     return float(0.5 * abs(g @ step) * n)
-
-
-def hessian(fun, x: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Central-difference Hessian of ``fun`` at ``x`` with steps ``h``."""
-    n = x.size
-    H = np.empty((n, n))
-    f0 = fun(x)
-    fp = np.empty(n)
-    fm = np.empty(n)
-    for i in range(n):
-        e = np.zeros(n)
-        e[i] = h[i]
-        fp[i], fm[i] = fun(x + e), fun(x - e)
-        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h[i] ** 2
-    for i in range(n):
-        for j in range(i + 1, n):
-            ei = np.zeros(n)
-            ej = np.zeros(n)
-            ei[i], ej[j] = h[i], h[j]
-            v = (fun(x + ei + ej) - fun(x + ei - ej) - fun(x - ei + ej) + fun(x - ei - ej))
-            H[i, j] = H[j, i] = v / (4 * h[i] * h[j])
-    return H
-
-
-def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray, list[str]]:
-    """Inverse of the observed information −H, kept symmetric positive definite.
-
-    Directions where the likelihood is flat or curved the wrong way are clipped to a tiny
-    curvature (a huge variance) and reported.
-    """
-    J = -0.5 * (H + H.T)
-    scale = np.sqrt(np.abs(np.diag(J)))
-    scale[scale == 0] = 1.0
-    Jn = J / np.outer(scale, scale)
-    lam, V = np.linalg.eigh(Jn)
-    warnings = []
-    floor = max(lam.max(), 1.0) * 1e-10
-    if lam.min() <= floor:
-        bad = V[:, lam <= floor]
-        involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
-        warnings.append(
-            "the likelihood is flat along a combination of "
-            f"{', '.join(involved)}: not identifiable from these data (their stds are huge)"
-        )
-        lam = np.maximum(lam, floor)
-    cov = (V / lam) @ V.T / np.outer(scale, scale)
-    return 0.5 * (cov + cov.T), warnings
 
 
 def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
@@ -339,7 +288,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         ll, _ = prob.profile(z)
         return -ll / prob.n_obs if np.isfinite(ll) else 1e10
 
-    starts = _start_grid(prob, _lsq_beta(samples, model))
+    starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
     if start:
         # a previous fit's values; parameters it lacks start mid-grid
         z0 = []
@@ -424,7 +373,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     cov = None
     std = dict.fromkeys(free, 0.0)
     if std_errors and free:
-        cov, cw = _observed_covariance(model, samples, p, free, gls_info, prob,
+        cov, cw = observed_covariance(model, samples, p, free, gls_info, prob,
                                        at_bound, hessian_passes)
         warnings += cw
         std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
@@ -443,70 +392,3 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         n_samples=len(samples), n_observed=samples.n_observed, dt=samples.dt,
         covariance=cov, cov_names=tuple(free) if cov is not None else (), info=info,
     )
-
-
-def _observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
-                         gls_info: np.ndarray, prob: _Problem, at_bound: list[str],
-                         passes: int = 2):
-    """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
-
-    A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
-    maximum: the others' covariance is then taken with it held at its estimate, and its
-    own std is the inverse curvature along it alone.
-    """
-    x0 = np.array([p[n] for n in free])
-    noise_scale = max(p[n] for n in model.names_of_kind("std"))
-    lin_std = {}
-    if gls_info.size:
-        ginv = np.linalg.pinv(gls_info)
-        lin_std = {n: float(np.sqrt(max(ginv[i, i], 0.0))) for i, n in enumerate(prob.lin_free)}
-    h = np.empty(x0.size)
-    for i, n in enumerate(free):
-        kind = model.kind(n)
-        if kind == "linear":
-            h[i] = 0.1 * lin_std.get(n, 0.0) or 1e-4 * max(abs(x0[i]), 1.0)
-        elif kind == "std":
-            h[i] = 1e-2 * max(abs(x0[i]), 0.1 * noise_scale)
-        else:
-            h[i] = 1e-3 * abs(x0[i])
-
-    def ll(x: np.ndarray) -> float:
-        q = dict(p)
-        for n, v in zip(free, x, strict=True):
-            q[n] = float(v)
-        for n in free:
-            if model.kind(n) in ("rate", "time") and q[n] <= 0:
-                return -np.inf
-        return prob.full_loglik(q)
-
-    warnings: list[str] = []
-    # a noise level whose removal costs no likelihood is at its boundary (≈ 0) too
-    ll0 = ll(x0)
-    at_bound = list(at_bound)
-    for i, n in enumerate(free):
-        if model.kind(n) == "std" and n not in at_bound:
-            x = x0.copy()
-            x[i] = 0.0
-            if ll0 - ll(x) < 1e-3:
-                at_bound.append(n)
-    for _ in range(max(1, passes)):
-        H = hessian(ll, x0, h)
-        if not np.all(np.isfinite(H)):
-            H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)
-        inner = [i for i, n in enumerate(free) if n not in at_bound]
-        cov = np.zeros((len(free), len(free)))
-        sub, warnings = covariance_from_hessian(H[np.ix_(inner, inner)], [free[i] for i in inner])
-        cov[np.ix_(inner, inner)] = sub
-        for i, n in enumerate(free):
-            if n in at_bound:
-                cov[i, i] = 1.0 / max(-H[i, i], 1e-300) if -H[i, i] > 0 else (0.1 * noise_scale) ** 2
-        sd = np.sqrt(np.diag(cov))
-        new_h = 0.1 * sd
-        for i, n in enumerate(free):
-            if model.kind(n) in ("rate", "time"):
-                new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
-            elif model.kind(n) == "std":
-                new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))
-            new_h[i] = max(new_h[i], 1e-9 * max(abs(x0[i]), 1e-12))
-        h = new_h
-    return cov, warnings

@@ -20,9 +20,29 @@ import numpy as np
 from ..errors import ModelError
 from .data import Samples
 from .kalman import kf_innovations
-from .terms import TERMS, VOCABULARY, Context, Param, Term
+from .terms import TERMS, Context, Param, Term
 
 LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """The random part of a model at given parameters, compiled: independent scalar
+    states ``x_i,k = phi_i x_i,k−1 + w_i,k`` (``var w = q_i``, ``x_i,0 ~ N(0, p0_i)``) summed
+    with the white noise (variance ``r``) into the measurement. ``states`` names the term
+    of each state. What ML, the LKF's noise search, Fisher information, simulation and the
+    diagnostics all filter with."""
+
+    states: tuple[str, ...]
+    phi: np.ndarray
+    q: np.ndarray
+    p0: np.ndarray
+    r: float
+
+    def __post_init__(self) -> None:
+        for name in ("phi", "q", "p0"):  # contiguous for the compiled filters
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name),
+                                                                dtype=float))
 
 
 @dataclass(frozen=True)
@@ -38,15 +58,14 @@ class Model:
         names = [n for n in names if n]
         seen: set[str] = set()
         for n in names:
-            if n not in VOCABULARY:
+            if n not in TERMS:
                 raise ModelError(
-                    f"unknown model term {n!r}; the vocabulary is: {', '.join(VOCABULARY)}"
+                    f"unknown model term {n!r}; the vocabulary is: {', '.join(TERMS)}"
+                    " (a plugin's term: is its package installed, or listed in plugins:?)"
                 )
             if n in seen:
                 raise ModelError(f"model term {n!r} is listed twice")
             seen.add(n)
-            if n not in TERMS:
-                raise ModelError(f"model term {n!r} is not implemented in this version")
         seen.add("white")
         for n in seen:
             for req in TERMS[n].requires:
@@ -56,7 +75,7 @@ class Model:
             raise ModelError(
                 "a model needs at least one stochastic drift term (markov, random_walk or markov2)"
             )
-        ordered = [n for n in VOCABULARY if n in seen]
+        ordered = [n for n in TERMS if n in seen]
         return cls(tuple(TERMS[n]() for n in ordered))
 
     @property
@@ -94,6 +113,17 @@ class Model:
     def param_names(self) -> tuple[str, ...]:
         return tuple(n for n, _ in self.params)
 
+    @cached_property
+    def _owner(self) -> dict[str, Term]:
+        return {t.key(q.name): t for t in self.terms for q in t.params}
+
+    def term_of(self, name: str) -> Term:
+        """The term a parameter ``<term>.<param>`` belongs to."""
+        try:
+            return self._owner[name]
+        except KeyError:
+            raise ModelError(f"{name!r} is not a parameter of the model {self}") from None
+
     def kind(self, name: str) -> str:
         return dict(self.params)[name].kind
 
@@ -128,21 +158,29 @@ class Model:
             return np.zeros((ctx.t.size, 0))
         return np.column_stack([cols[n] for n in lin])
 
-    def stochastic(self, p: Mapping[str, float], dt: float):
-        """``(phi, q, p0, r)``: the diagonal state space of the random part."""
-        st = [s for t in self.terms for s in t.states(p, dt)]
+    def state_space(self, p: Mapping[str, float], dt: float) -> StateSpace:
+        """The random part compiled at ``p`` for the step ``dt`` (:class:`StateSpace`)."""
+        names, st = [], []
+        for t in self.terms:
+            for s in t.states(p, dt):
+                names.append(t.name)
+                st.append(s)
         arr = np.array(st, dtype=float).reshape(-1, 3)
         r = sum(t.measurement_var(p) for t in self.terms)
-        return (np.ascontiguousarray(arr[:, 0]), np.ascontiguousarray(arr[:, 1]),
-                np.ascontiguousarray(arr[:, 2]), float(r))
+        return StateSpace(tuple(names), arr[:, 0], arr[:, 1], arr[:, 2], float(r))
+
+    def stochastic(self, p: Mapping[str, float], dt: float):
+        """``(phi, q, p0, r)`` of :meth:`state_space` (kept for older callers)."""
+        ss = self.state_space(p, dt)
+        return ss.phi, ss.q, ss.p0, ss.r
 
     def filter_columns(self, p: Mapping[str, float], samples: Samples, X: np.ndarray):
         """Innovations of ``[y, X]`` through the model's Kalman filter: ``(E, f)``."""
-        phi, q, p0, r = self.stochastic(p, samples.dt)
+        ss = self.state_space(p, samples.dt)
         Y = np.empty((len(samples), 1 + X.shape[1]))
         Y[:, 0] = samples.drift
         Y[:, 1:] = X
-        return kf_innovations(phi, q, p0, r, Y, samples.noise_weights)
+        return kf_innovations(ss.phi, ss.q, ss.p0, ss.r, Y, samples.noise_weights)
 
     def innovations(self, p: Mapping[str, float], samples: Samples):
         """One-step innovations ``e`` and their variances ``f`` at the parameters ``p``."""

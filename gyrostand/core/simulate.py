@@ -51,7 +51,8 @@ def simulate(
     X = model.regressors(params, context(base))
     theta = np.array([params[n] for n in model.names_of_kind("linear")])
     y = X @ theta if theta.size else np.zeros_like(t)
-    phi, q, p0, r = model.stochastic(params, dt)
+    ss = model.state_space(params, dt)
+    phi, q, p0, r = ss.phi, ss.q, ss.p0, ss.r
     N = t.size
     from scipy.signal import lfilter  # here: scipy.signal imports scipy.stats (0.5 s)
 

@@ -1,136 +1,41 @@
-"""Model terms: the named building blocks of a drift model (PRODUCT.md vocabulary).
+"""The built-in model terms (PRODUCT.md's vocabulary, in its order) and the registry of
+every term, built-in or plugin.
 
-Every model is ``y_k = sum_j theta_j X_j,k(eta) + sum_i x_i,k + v_k``:
-
-* *linear* parameters ``theta`` (e.g. ``temp.gamma``, ``bias.b``) multiply regressors
-  ``X_j`` that may depend on the nonlinear parameters ``eta`` (e.g. the temperature input
-  is filtered through the Gauss-Markov dynamics, so its regressor depends on ``markov.beta``);
-* independent stochastic scalar states ``x_i`` (``markov``, ``random_walk``, ``markov2``),
-  each ``x_{i,k} = phi_i x_{i,k-1} + w_{i,k}``, and the white measurement noise ``v``.
-
-Units: ``y`` stands for the drift's unit (e.g. deg/h), ``degC`` for temperature, ``s`` for
-time.
+Each term is one class: its parameters, role, regressors (batch and causal), prior scale,
+diagnostic signature, null hypothesis, look-alikes and summary bit (the facts are
+described in :class:`~gyrostand.core.term_base.Term`). A user's term registers with
+:func:`register` (:mod:`gyrostand.plugins` finds them).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import ClassVar
+import math
+import re
 
 import numpy as np
 
-from .kalman import first_order_response, foh_weights
+from ..errors import ModelError
 from .names import VOCABULARY as VOCABULARY  # re-exported; defined in names.py
+from .term_base import (
+    HYSTERESIS_RATE,
+    NULLS,
+    RATE_WINDOW_S,
+    ROLES,
+    T_REF,
+    Bin,
+    Context,
+    P,
+    Param,
+    Scales,
+    Term,
+)
 
-P = Mapping[str, float]
-
-
-@dataclass(frozen=True)
-class Param:
-    """One parameter of a term.
-
-    ``kind`` is ``"rate"`` (positive, 1/s, enters nonlinearly), ``"time"`` (a positive time
-    constant, s, enters nonlinearly), ``"std"`` (a standard deviation or noise intensity,
-    >= 0) or ``"linear"`` (a coefficient the model is linear in).
-    """
-
-    name: str
-    kind: str
-    unit: str
-    doc: str
-
-
-#: window of the temperature-rate estimate (s): a local quadratic fit (Savitzky-Golay)
-RATE_WINDOW_S = 61.0
-#: rate (degC/s) at which the hysteresis regressor tanh(dT/dt / r0) reaches 0.76
-HYSTERESIS_RATE = 1e-3
-#: reference temperature of temp2 (degC)
-T_REF = 25.0
+__all__ = ["TERMS", "BUILTIN", "ORIGIN", "register", "term_class", "summary_bits",
+           "separation", "Term", "Param", "Context", "Bin", "Scales", "ROLES", "NULLS",
+           "HYSTERESIS_RATE", "T_REF", "RATE_WINDOW_S", "VOCABULARY"]
 
 
-@dataclass(frozen=True)
-class Context:
-    """What terms need from the data: times ``t`` (s), temperature ``temp`` (degC), ``dt``."""
-
-    t: np.ndarray
-    temp: np.ndarray
-    dt: float
-    _cache: dict = field(default_factory=dict, compare=False, repr=False)
-
-    def through_markov(self, u: np.ndarray, beta: float) -> np.ndarray:
-        """Response of dx/dt = -beta x + u(t) to the input ``u`` (linear between samples).
-
-        Starts in equilibrium with the first input, ``x_0 = u_0 / beta`` (the gyro has
-        soaked at the starting temperature), and is exact for piecewise-linear ``u``.
-        """
-        phi, a0, a1 = foh_weights(beta, self.dt)
-        return first_order_response(np.ascontiguousarray(u, dtype=float), phi, a0, a1,
-                                    float(u[0]) / beta)
-
-    def effective_temp(self, p: P) -> np.ndarray:
-        """The temperature that drives the drift: T, or T lagged by ``temp_lag.tau``.
-
-        dT_L/dt = (T − T_L)/τ, T_L(0) = T(0).
-        """
-        tau = p.get("temp_lag.tau")
-        if tau is None:
-            return self.temp
-        return self.through_markov(self.temp / tau, 1.0 / tau)
-
-    @property
-    def temp_rate(self) -> np.ndarray:
-        """dT/dt (degC/s), robust to sensor noise and quantisation.
-
-        A naive difference of 0.05-degC steps is mostly quantisation noise; a local
-        quadratic least-squares fit over ``RATE_WINDOW_S`` (Savitzky-Golay derivative)
-        is exact on ramps and averages the steps out (noise std ≈ q/√12 · √(12/W³)).
-        """
-        if "rate" not in self._cache:
-            n = self.temp.size
-            w = int(round(RATE_WINDOW_S / self.dt)) | 1
-            w = min(w, n if n % 2 else n - 1)
-            if w < 5:
-                rate = np.gradient(self.temp, self.dt) if n > 1 else np.zeros(n)
-            else:
-                from scipy.signal import savgol_filter  # scipy.signal imports scipy.stats
-
-                rate = savgol_filter(self.temp, w, 2, deriv=1, delta=self.dt, mode="interp")
-            self._cache["rate"] = rate
-        return self._cache["rate"]
-
-
-class Term:
-    """Base class. Subclasses set ``name``, ``params`` and override what they contribute."""
-
-    name: ClassVar[str]
-    params: ClassVar[tuple[Param, ...]] = ()
-    requires: ClassVar[tuple[str, ...]] = ()
-    n_states: ClassVar[int] = 0
-    math: ClassVar[str] = ""
-
-    def key(self, short: str) -> str:
-        return f"{self.name}.{short}"
-
-    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        """Regressor column of each linear parameter, keyed by full name."""
-        return {}
-
-    def states(self, p: P, dt: float) -> list[tuple[float, float, float]]:
-        """``(phi, q, p0)`` of each stochastic state this term adds."""
-        return []
-
-    def measurement_var(self, p: P) -> float:
-        return 0.0
-
-    def __repr__(self) -> str:
-        return self.name
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Term) and other.name == self.name
-
-    def __hash__(self) -> int:
-        return hash(self.name)
+RANDOM = "a random process: no deterministic signature (it shows in the autocorrelation)"
 
 
 class Markov(Term):
@@ -147,11 +52,24 @@ class Markov(Term):
     )
     n_states = 1
     math = "dε/dt = −β ε + inputs + √(2σ²β) w"
+    role = "process"
+    bit = 0
+    no_signature = RANDOM
 
     def states(self, p: P, dt: float) -> list[tuple[float, float, float]]:
         beta, sigma = p[self.key("beta")], p[self.key("sigma")]
         phi = float(np.exp(-beta * dt))
         return [(phi, sigma * sigma * -np.expm1(-2.0 * beta * dt), sigma * sigma)]
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        return {self.key("beta"): s.rate}  # β ≤ 1/Δt
+
+    def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
+        if self.name == "markov" and q.name == "beta":
+            # least squares' β seeds ML's grid too (ml.py), but with measurement noise it
+            # is biased by orders of magnitude (errors in variables): a wide geometric axis
+            return list(np.geomspace(2.0 / duration, 0.5 / dt, 5))
+        return super().start_values(q, duration, dt)
 
 
 class Markov2(Markov):
@@ -163,6 +81,8 @@ class Markov2(Markov):
         Param("sigma", "std", "y", "stationary standard deviation of the second process"),
     )
     math = "dε₂/dt = −β₂ ε₂ + √(2σ₂²β₂) w₂"
+    bit = 11
+    null = "nuisance"  # β₂ is not identified when σ₂ = 0
 
 
 class Temp(Term):
@@ -172,9 +92,16 @@ class Temp(Term):
     params = (Param("gamma", "linear", "y/(s*degC)", "temperature coefficient"),)
     requires = ("markov",)
     math = "γ·T(t) into dε/dt"
+    role = "input"
+    bit = 1
+    no_signature = ("the drift's own temperature input: its filtered response follows the "
+                    "markov state; its likelihood-ratio test alone judges it")
 
-    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        return {self.key("gamma"): ctx.through_markov(ctx.effective_temp(p), p["markov.beta"])}
+    def input(self, T):
+        return T
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        return {self.key("gamma"): s.y * s.rate / s.T}  # |γ| ≲ β|ε|/|T| (γT = βε)
 
 
 class Bias(Term):
@@ -183,9 +110,15 @@ class Bias(Term):
     name = "bias"
     params = (Param("b", "linear", "y", "constant offset"),)
     math = "+ b"
+    bit = 3
+    constant = True
+    no_signature = "a constant: the residuals' cross-correlation removes their mean"
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("b"): np.ones_like(ctx.t)}
+
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        return {self.key("b"): 1.0}
 
 
 class White(Term):
@@ -194,10 +127,16 @@ class White(Term):
     name = "white"
     params = (Param("sigma", "std", "y", "measurement noise standard deviation"),)
     math = "+ v,  v ~ N(0, σ_v²)"
+    role = "noise"
+    bit = 2
+    no_signature = "white noise: no deterministic signature"
 
     def measurement_var(self, p: P) -> float:
         s = p[self.key("sigma")]
         return s * s
+
+    def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
+        return [1e-3, 0.03, 0.3, 1.0]  # σ_v/σ
 
 
 class RandomWalk(Term):
@@ -207,10 +146,20 @@ class RandomWalk(Term):
     params = (Param("q", "std", "y/sqrt(s)", "random-walk intensity"),)
     n_states = 1
     math = "dr/dt = q w"
+    role = "process"
+    bit = 10
+    null = "boundary"  # q = 0 is the edge of its range
+    no_signature = RANDOM
+    look_alikes = {"markov2": "a longer run: a second Gauss–Markov process levels off at its "
+                              "σ₂, a random walk keeps growing"}
 
     def states(self, p: P, dt: float) -> list[tuple[float, float, float]]:
         q = p[self.key("q")]
         return [(1.0, q * q * dt, 0.0)]
+
+    def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
+        r = np.sqrt(duration)
+        return [0.03 / r, 0.3 / r, 3 / r]  # q/σ: a walk of 0.03..3 σ over the record
 
 
 class Temp2(Term):
@@ -220,10 +169,20 @@ class Temp2(Term):
     params = (Param("gamma2", "linear", "y/(s*degC^2)", "quadratic temperature coefficient"),)
     requires = ("markov",)
     math = "γ₂·(T − T_ref)² into dε/dt"
+    role = "input"
+    bit = 4
+    signature_needs = ("markov.beta",)
+    look_alikes = {
+        "temp_lag": "visit the same temperatures while heating and while cooling (a "
+                    "symmetric cycle): a quadratic term is the same both ways, a lag is not",
+        "hysteresis": "a symmetric heating/cooling cycle over the same range separates them",
+    }
 
-    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        u = (ctx.effective_temp(p) - T_REF) ** 2
-        return {self.key("gamma2"): ctx.through_markov(u, p["markov.beta"])}
+    def input(self, T):
+        return (T - T_REF) ** 2
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        return {self.key("gamma2"): s.y * s.rate / (s.T * s.T)}
 
 
 class TempLag(Term):
@@ -237,6 +196,19 @@ class TempLag(Term):
     params = (Param("tau", "time", "s", "thermal lag between sensor and gyro"),)
     requires = ("temp",)
     math = "T → T_L,  dT_L/dt = (T − T_L)/τ"
+    role = "modifier"
+    bit = 5
+    null = "nuisance"  # τ is not identified when the lag has no effect
+    signature_needs = ("markov.beta",)
+
+    def modify_temperature(self, p: P, ctx: Context, T: np.ndarray) -> np.ndarray:
+        # dT_L/dt = (T − T_L)/τ, T_L(0) = T(0)
+        tau = p[self.key("tau")]
+        return ctx.through_markov(T / tau, 1.0 / tau)
+
+    def signature(self, p: P, ctx: Context) -> np.ndarray:
+        # the change a small lag makes: −τ · (response to dT/dt)
+        return -ctx.through_markov(ctx.temp_rate, p["markov.beta"])
 
 
 class TempRate(Term):
@@ -245,9 +217,23 @@ class TempRate(Term):
     name = "temp_rate"
     params = (Param("k", "linear", "y*s/degC", "sensitivity to the temperature rate"),)
     math = "+ k·dT/dt"
+    bit = 6
+    look_alikes = {
+        "temp_lag": "a lag τ acts like −τ·γ·dT/dt during slow ramps; fast ramps or steps "
+                    "(faster than 1/τ) followed by long soaks separate them: the lag keeps "
+                    "acting after the ramp ends, the rate term stops at once",
+        "hysteresis": "both follow dT/dt; ramps of clearly different rates separate them: "
+                      "the rate term scales with the ramp rate, hysteresis does not",
+    }
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("k"): ctx.temp_rate}
+
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        return {self.key("k"): now.rate}
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        return {self.key("k"): 10 * s.y * 600.0}  # |k| dT/dt ≲ |y| at 0.1 degC/min
 
 
 class Hysteresis(Term):
@@ -260,9 +246,16 @@ class Hysteresis(Term):
     name = "hysteresis"
     params = (Param("h", "linear", "y", "half the heating/cooling offset difference"),)
     math = "+ h·sign(dT/dt)"
+    bit = 7
+    look_alikes = {"temp_lag": "long soaks after each ramp separate them: a lag decays "
+                               "during the soak, hysteresis holds until the direction "
+                               "changes"}
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("h"): np.tanh(ctx.temp_rate / HYSTERESIS_RATE)}
+
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        return {self.key("h"): math.tanh(now.rate / HYSTERESIS_RATE)}
 
 
 class Trend(Term):
@@ -271,9 +264,21 @@ class Trend(Term):
     name = "trend"
     params = (Param("c", "linear", "y/s", "drift rate of the offset"),)
     math = "+ c·(t − t₀)"
+    bit = 8
+    look_alikes = {
+        "random_walk": "a longer run or repeated cycles: a trend keeps its rate, a random "
+                       "walk wanders",
+        "warmup": "a longer record after switch-on: the warm-up settles, the trend does not",
+    }
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("c"): ctx.t - ctx.t[0]}
+
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        return {self.key("c"): now.t}
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        return {self.key("c"): 10 * s.y / 3600.0}  # ≲ |y| per hour
 
 
 class Warmup(Term):
@@ -285,12 +290,97 @@ class Warmup(Term):
         Param("tau", "time", "s", "time constant of the switch-on transient"),
     )
     math = "+ A·exp(−(t − t₀)/τ_w)"
+    bit = 9
+    look_alikes = {"random_walk": "repeat the switch-on: a warm-up repeats, a random walk "
+                                  "does not"}
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
         return {self.key("A"): np.exp(-(ctx.t - ctx.t[0]) / p[self.key("tau")])}
 
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        return {self.key("A"): math.exp(-now.t / p[self.key("tau")])}
 
+    def signature(self, p: P, ctx: Context) -> np.ndarray:
+        # τ is not known before the fit: a tenth of the record (at least 10 steps)
+        tau = max(0.1 * (ctx.t[-1] - ctx.t[0]), 10 * ctx.dt)
+        return np.exp(-(ctx.t - ctx.t[0]) / tau)
+
+
+#: every term gyrostand knows: the built-ins in PRODUCT.md's order (their ``bit``), then
+#: the plugins in the order registered (:func:`register`)
 TERMS: dict[str, type[Term]] = {
     cls.name: cls for cls in (Markov, Temp, White, Bias, Temp2, TempLag, TempRate, Hysteresis,
                               Trend, Warmup, RandomWalk, Markov2)
 }
+BUILTIN: dict[str, type[Term]] = dict(TERMS)
+if tuple(TERMS) != VOCABULARY or [c.bit for c in TERMS.values()] != list(range(len(TERMS))):
+    raise RuntimeError("terms.TERMS must follow names.VOCABULARY, bit i = term i")
+#: where each registered plugin term came from (name -> "module:Class" and how it was found)
+ORIGIN: dict[str, str] = {}
+_NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+_KINDS = ("rate", "time", "std", "linear")
+
+
+def register(cls: type[Term], origin: str = "") -> type[Term]:
+    """Add a user's term class to :data:`TERMS` (a plugin: see :mod:`gyrostand.plugins`).
+
+    Its summary bit is the next free one after the built-ins' unless it sets ``bit``.
+    Registering the same class again is a no-op; a name or bit another term has is an
+    error naming both.
+    """
+    where = origin or f"{cls.__module__}.{getattr(cls, '__qualname__', cls)}"
+    if not (isinstance(cls, type) and issubclass(cls, Term)):
+        raise ModelError(f"plugin {where}: not a subclass of gyrostand.core.terms.Term")
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise ModelError(f"plugin {where}: term name {name!r} must be lower-case letters, "
+                         "digits and '_' (starting with a letter)")
+    old = TERMS.get(name)
+    if old is cls:
+        return cls
+    if old is not None:
+        what = "the built-in term" if name in BUILTIN else "the plugin term"
+        other = f"{old.__module__}.{old.__qualname__}"
+        raise ModelError(f"plugin {where}: term name {name!r} clashes with {what} {name!r} "
+                         f"({ORIGIN.get(name, other)})")
+    if cls.role not in ROLES:
+        raise ModelError(f"plugin {where}: role {cls.role!r} is not one of {', '.join(ROLES)}")
+    if cls.null not in NULLS:
+        raise ModelError(f"plugin {where}: null {cls.null!r} is not one of {', '.join(NULLS)}")
+    for q in cls.params:
+        if not isinstance(q, Param) or q.kind not in _KINDS or not _NAME_RE.match(q.name):
+            raise ModelError(f"plugin {where}: parameter {q!r} must be a Param with a kind "
+                             f"of {', '.join(_KINDS)}")
+    used = {int(c.bit): n for n, c in TERMS.items() if c.bit is not None}
+    if cls.bit is None:
+        cls.bit = max(used) + 1
+    elif cls.bit in used or cls.bit < 0:
+        raise ModelError(f"plugin {where}: summary bit {cls.bit} is taken by term "
+                         f"{used.get(cls.bit)!r}" if cls.bit in used else
+                         f"plugin {where}: summary bit {cls.bit} must be >= 0")
+    TERMS[name] = cls
+    ORIGIN[name] = where
+    return cls
+
+
+def term_class(name: str) -> type[Term]:
+    """The class of the term ``name``; a :class:`ModelError` naming it and the known terms
+    when there is none."""
+    try:
+        return TERMS[name]
+    except KeyError:
+        raise ModelError(f"unknown model term {name!r}; the vocabulary is: "
+                         f"{', '.join(TERMS)}") from None
+
+
+def summary_bits() -> dict[str, int]:
+    """Bit of every known term in the CAN summary's ``ModelTerms``."""
+    return {n: int(c.bit) for n, c in TERMS.items() if c.bit is not None}
+
+
+def separation(a: str, b: str) -> str | None:
+    """What temperature profile tells the look-alike terms ``a`` and ``b`` apart, as either
+    term states it (None when neither does)."""
+    ca, cb = TERMS.get(a), TERMS.get(b)
+    return ((ca.look_alikes.get(b) if ca else None) or
+            (cb.look_alikes.get(a) if cb else None))

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..core.candidates import Report, fit_error
 from ..core.data import Samples
-from ..core.lkf import ESTIMATED, held_names, lkf, lkf_layout
+from ..core.lkf import estimated_names, held_names, lkf, lkf_layout
 from ..core.ml import ml
 from ..errors import DataError, GyrostandError
 from ..workbench import Subject, read_ledger
@@ -186,7 +186,7 @@ def _lkf_pass(samples: Samples, report: Report) -> Convergence:
     r = lkf(samples, model, variant="paper", beta0=max(p["markov.beta"], 1e-9),
             gamma0=p.get("temp.gamma", 0.0),
             b0=p.get("bias.b", 0.0), held=held)
-    names = [n for n in layout if n in ESTIMATED]
+    names = [n for n in layout if n in estimated_names(model)]
     return Convergence("LKF (one pass linearised at the ML estimate)", samples.t - samples.t[0],
                        {n: np.asarray(r.history[n]) for n in names},
                        {n: np.asarray(r.history[n + ":std"]) for n in names},

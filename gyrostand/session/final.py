@@ -35,11 +35,11 @@ import numpy as np
 
 from ..config import GyroConfig, SessionConfig
 from ..core.data import Samples
-from ..core.identify import identify
 from ..core.model import Model
+from ..core.registry import REGISTRY
 from ..core.results import FitResult, unit_text
 from ..errors import GyrostandError
-from .online import LkfPoint, OnlineEstimate, resolve_lkf_point
+from .online import LkfPoint, OnlineEstimate
 from .outputs import write_atomic
 
 __all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods",
@@ -48,9 +48,13 @@ __all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_
 log = logging.getLogger(__name__)
 
 
+#: the identifier every final fit runs, whatever the gyro's ``identifiers:``
+ALWAYS = "ml"
+
+
 def final_methods(gyro: GyroConfig) -> tuple[str, ...]:
     """The configured identifiers, then ``ml`` if not among them."""
-    return tuple(dict.fromkeys((*gyro.identifiers, "ml")))
+    return tuple(dict.fromkeys((*gyro.identifiers, ALWAYS)))
 
 
 @dataclass
@@ -125,40 +129,22 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
     out.observed = samples.n_observed
     errors = (GyrostandError, ValueError, KeyError, np.linalg.LinAlgError)
     for method in final_methods(gyro):
+        ident = REGISTRY[method]
         label = method
-        if method == "lkf" and online_lkf is not None:
-            label = "lkf_batch"
+        if ident.reports_online and online_lkf is not None:
+            label = f"{method}_batch"
             try:
-                out.fits["lkf"] = online_lkf(samples)
+                out.fits[method] = online_lkf(samples)
             except errors as exc:
-                log.warning("gyro %s: the online lkf at stop: %s", gyro.name, exc)
-                out.fits["lkf"] = str(exc)
+                log.warning("gyro %s: the online %s at stop: %s", gyro.name, method, exc)
+                out.fits[method] = str(exc)
         try:
-            opts: dict[str, Any] = {}
-            if method == "lkf":
-                opts = _batch_lkf_options(model, gyro, samples, lkf_point)
-            out.fits[label] = identify(samples, model, method, **opts)
+            opts = ident.final_options(gyro.options(method), model, samples, lkf_point)
+            out.fits[label] = ident.fit(samples, model, opts)
         except errors as exc:
             log.warning("gyro %s: final %s fit failed: %s", gyro.name, label, exc)
             out.fits[label] = str(exc)
     return out
-
-
-def _batch_lkf_options(model: Model, gyro: GyroConfig, samples: Samples,
-                       lkf_point: LkfPoint | None) -> dict[str, Any]:
-    """Options of the batch LKF: the paper variant at the session's point (values the file
-    leaves out from a fit of the record); relin from the values the file gives (held
-    fixed), the rest from the record."""
-    c = gyro.lkf
-    if c.variant == "paper":
-        pt = lkf_point or resolve_lkf_point(model, c, samples)
-        return {"variant": "paper", "beta0": pt.beta0, "gamma0": pt.gamma0, "b0": pt.b0,
-                "held": dict(pt.held), "iterate": c.iterate}
-    held = dict(c.held)
-    if c.white_sigma is not None:
-        held["white.sigma"] = c.white_sigma
-    return {"variant": "relin", "beta0": c.beta0, "gamma0": c.gamma0, "b0": c.b0,
-            "sigma": c.sigma, "held": held, "soaked": c.soaked}
 
 
 def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path,

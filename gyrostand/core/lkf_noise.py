@@ -1,0 +1,183 @@
+"""The converging LKF's held noise levels (:class:`~gyrostand.core.lkf_relin.RelinLKF`):
+re-estimated at the current point, and their share of the estimate's covariance.
+
+:func:`reestimate`: the held noise levels the caller did not fix are searched at the
+current point by a 1-D likelihood search: with both σ and σ_v free the common scale is
+concentrated out (``s² = Σ e²/f̃ / n``) and the ratio σ_v/σ searched (bounded Brent in
+ln ratio); other processes (``random_walk``, ``markov2``) keep their ratio to σ.
+:func:`inflation`: the estimate's covariance grows by the delta method with the searched
+level's variance.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .kalman import NO_WEIGHTS, kf_run
+from .lkf_kernel import gm_profile
+from .term_base import Context
+
+if TYPE_CHECKING:
+    from .lkf_relin import RelinLKF
+
+#: bounds of the searched noise ratio σ_v/σ
+RATIO_BOUNDS = (1e-3, 1e2)
+#: step in the log noise parameter for its curvature and the estimate's sensitivity
+NOISE_STEP = 0.1
+#: a noise level searched to a bound of its range: moved this far (log) into it for the
+#: estimate's sensitivity
+BOUND_STEP = 4.0
+
+
+def inflation(f: RelinLKF, n: int, U: np.ndarray) -> None:
+    """The held noise levels are estimates: add their share to the covariance of the
+    estimate by the delta method, ``C += (∂θ̂/∂z)(∂θ̂/∂z)' var ẑ`` with z the searched
+    log noise parameter, ``var ẑ`` from the curvature of its profile likelihood and
+    ``∂θ̂/∂z`` from one more pass with z moved by ``h`` (then the state is restored)."""
+    f._infl = np.zeros((len(f.names),) * 2)
+    if f._noise is None:
+        return
+    apply, z, var_z, h, at_bound = f._noise
+
+    saved = (f.x.copy(), f.P.copy(), f._st.copy(), f._E[:n].copy(),
+             f._F[:n].copy(), dict(f.held), f._qd)
+    v0 = f.values.copy()
+    apply(z + h)
+    f._configure()
+    f._start()
+    f._pass(0, n, U)
+    dv = (f.values - v0) / h
+    k = len(f.names)
+    extra = f.P[1: 1 + k, 1: 1 + k] - saved[1][1: 1 + k, 1: 1 + k]
+    f.x, f.P, f._st = saved[0], saved[1], saved[2]
+    f._E[:n], f._F[:n] = saved[3], saved[4]
+    f.held, f._qd = saved[5], saved[6]
+    f._configure()
+    if np.all(np.isfinite(dv)):
+        f._infl = np.outer(dv, dv) * var_z
+        if at_bound and np.all(np.diag(extra) > 0):
+            # ... and at a bound (the level not estimated), the wider band of the
+            # level moved into its range (inside it, that term averages out)
+            f._infl += extra
+
+def reestimate(f: RelinLKF, ctx: Context) -> None:
+    """The held noise levels not fixed by the caller, at the current point."""
+    f._noise = None
+    free = [k for k in ("markov.sigma", "white.sigma") if k not in f.fixed]
+    if not free or f.n < 10:
+        return
+    p = {**f.held, **f._model_point()}
+    X = f.model.regressors(p, ctx)
+    lin = f.model.names_of_kind("linear")
+    theta = np.array([p[k] for k in lin])
+    d = f._y[: f.n] - (X @ theta if theta.size else 0.0)
+    D = np.ascontiguousarray(d[:, None])
+    sig0 = f.held["markov.sigma"]
+    others = {k: v / sig0 for k, v in f.held.items()
+              if f.model.kind(k) == "std" and k not in ("markov.sigma", "white.sigma")}
+
+    single = f.model.n_states == 1
+    memo: dict[tuple[float, bool], tuple[float, float]] = {}
+
+    def nll(z: float, scale_free: bool) -> tuple[float, float]:
+        """−ln L at ln ratio z (σ = 1 when the scale is concentrated), and s²."""
+        if (z, scale_free) in memo:
+            return memo[z, scale_free]
+        q = dict(p)
+        if scale_free:
+            q["markov.sigma"], q["white.sigma"] = 1.0, math.exp(z)
+            for k, v in others.items():
+                q[k] = v
+        elif "markov.sigma" in free:
+            q["markov.sigma"] = math.exp(z)
+        else:
+            q["white.sigma"] = math.exp(z)
+        ss = f.model.state_space(q, f.dt)
+        if single:  # markov + white: the scalar filter
+            g, slogf, nobs = gm_profile(d, ss.phi[0], ss.q[0], ss.r, ss.p0[0])
+        else:
+            G, slogf, nobs = kf_run(ss.phi, ss.q, ss.p0, ss.r, NO_WEIGHTS, D, False)[2:]
+            g = float(G[0, 0])
+        out = (math.inf, 1.0)
+        if np.isfinite(slogf) and nobs > 0:
+            if scale_free:
+                out = 0.5 * (nobs * math.log(g / nobs) + slogf), g / nobs
+            else:
+                out = 0.5 * (g + slogf), 1.0
+        memo[z, scale_free] = out
+        return out
+
+    def brent(a: float, b: float, scale_free: bool) -> float:
+        res = minimize_scalar(lambda z: nll(z, scale_free)[0], bounds=(a, b),
+                              method="bounded", options={"xatol": 0.02})
+        return float(res.x)
+
+    def search(z0: float, lo: float, hi: float, scale_free: bool) -> float:
+        """Bounded Brent in a bracket of ±1.5 around ``z0``; when the minimum sits at
+        the edge of the bracket or near a bound of [lo, hi] (the profile can have a
+        second minimum where one noise level vanishes), a coarse grid over [lo, hi]
+        picks the bracket again."""
+        z = brent(max(lo, z0 - 1.5), min(hi, z0 + 1.5), scale_free)
+        near = min(z - lo, hi - z) < 0.5 or abs(z - z0) > 1.45
+        if near:
+            grid = np.linspace(lo, hi, 9)
+            best = float(grid[int(np.argmin([nll(float(g), scale_free)[0]
+                                             for g in grid]))])
+            if nll(best, scale_free)[0] < nll(z, scale_free)[0]:
+                z = brent(max(lo, best - 1.5), min(hi, best + 1.5), scale_free)
+        return z if nll(z, scale_free)[0] <= nll(z0, scale_free)[0] else z0
+
+    b0 = float(f.point[0])
+    if len(free) == 2:
+        lo, hi = math.log(RATIO_BOUNDS[0]), math.log(RATIO_BOUNDS[1])
+        z0 = math.log(min(max(f.held["white.sigma"] / sig0, RATIO_BOUNDS[0]),
+                          RATIO_BOUNDS[1]))
+        z = search(z0, lo, hi, True)
+        scale_free = True
+
+        def apply(z: float) -> None:
+            s = math.sqrt(nll(z, True)[1])
+            f.held["markov.sigma"] = s
+            f.held["white.sigma"] = s * math.exp(z)
+            for k, v in others.items():
+                f.held[k] = s * v
+            f._qd = s * s * -math.expm1(-2.0 * b0 * f.dt)
+    else:
+        ref = f.held[free[0]] if f.held[free[0]] > 0 else sig0
+        z0 = math.log(max(ref, 1e-12))
+        lo, hi = z0 - 8.0, z0 + 8.0
+        z = search(z0, lo, hi, False)
+        scale_free = False
+
+        def apply(z: float) -> None:
+            f.held[free[0]] = math.exp(z)
+            if free[0] == "markov.sigma":
+                f._qd = math.exp(2 * z) * -math.expm1(-2.0 * b0 * f.dt)
+    apply(z)
+    # var ẑ from the curvature of −ln L (a flat profile: the full search range)
+    c = (nll(z + NOISE_STEP, scale_free)[0] - 2 * nll(z, scale_free)[0]
+         + nll(z - NOISE_STEP, scale_free)[0]) / NOISE_STEP ** 2
+    span = (hi - lo) / 2
+    var_z = min(1.0 / c, span * span) if c > 0 else span * span
+    # the sensitivity pass moves the drift's noise up by one std of ẑ (σ larger:
+    # z = ln σ_v/σ down, or ln σ up): a finite difference over the plausible range
+    up = -1.0 if scale_free or free[0] == "white.sigma" else 1.0
+    h = up * min(max(math.sqrt(var_z), NOISE_STEP), BOUND_STEP)
+    at_bound = hi - z < 0.05 if scale_free else (z - lo < 0.05 or hi - z < 0.05)
+    if scale_free and z - lo < 0.05:
+        # σ_v/σ at its lower bound: σ_v ≈ 0, the data are smooth; the ratio's direction
+        # does not move the estimate and σ (the scale) is concentrated
+        f._noise = None
+        return
+    if at_bound:
+        # at a bound of its search the level is not estimated: the estimate's share is
+        # its change when the level moves by BOUND_STEP into the range (var ẑ = step²)
+        h = BOUND_STEP if z - lo < 0.05 else -BOUND_STEP
+        var_z = h * h
+    if not lo <= z + h <= hi:
+        h = -h
+    f._noise = (apply, z, var_z, h, at_bound)

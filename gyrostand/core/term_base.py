@@ -1,0 +1,283 @@
+"""The term protocol: what a model term is and every fact it owns (PRODUCT.md vocabulary).
+
+A :class:`Term` owns every fact about its effect: its parameters (names, kinds, units),
+its role in the state space, its regressor for a batch fit and its causal regressor for
+the online filter (or its input u(T)), the LKF's prior scale of its coefficients, its
+signature for the residual cross-correlation, its null hypothesis in a candidate test,
+its look-alikes and what separates them, and its bit in the CAN summary. The identifiers,
+diagnostics, candidate tests and the CAN summary read these facts; none keeps a table of
+terms. The built-in terms and the registry are in :mod:`gyrostand.core.terms`; a user's
+own term is a subclass registered there (see :mod:`gyrostand.plugins`).
+
+Every model is ``y_k = sum_j theta_j X_j,k(eta) + sum_i x_i,k + v_k``:
+
+* *linear* parameters ``theta`` (e.g. ``temp.gamma``, ``bias.b``) multiply regressors
+  ``X_j`` that may depend on the nonlinear parameters ``eta`` (e.g. the temperature input
+  is filtered through the Gauss-Markov dynamics, so its regressor depends on ``markov.beta``);
+* independent stochastic scalar states ``x_i`` (``markov``, ``random_walk``, ``markov2``),
+  each ``x_{i,k} = phi_i x_{i,k-1} + w_{i,k}``, and the white measurement noise ``v``.
+
+Units: ``y`` stands for the drift's unit (e.g. deg/h), ``degC`` for temperature, ``s`` for
+time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from ..errors import ModelError
+from .kalman import first_order_response, foh_weights
+
+P = Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a term.
+
+    ``kind`` is ``"rate"`` (positive, 1/s, enters nonlinearly), ``"time"`` (a positive time
+    constant, s, enters nonlinearly), ``"std"`` (a standard deviation or noise intensity,
+    >= 0) or ``"linear"`` (a coefficient the model is linear in).
+    """
+
+    name: str
+    kind: str
+    unit: str
+    doc: str
+
+
+#: window of the temperature-rate estimate (s): a local quadratic fit (Savitzky-Golay)
+RATE_WINDOW_S = 61.0
+#: rate (degC/s) at which the hysteresis regressor tanh(dT/dt / r0) reaches 0.76
+HYSTERESIS_RATE = 1e-3
+#: reference temperature of temp2 (degC)
+T_REF = 25.0
+
+
+@dataclass(frozen=True)
+class Context:
+    """What terms need from the data: times ``t`` (s), temperature ``temp`` (degC), ``dt``."""
+
+    t: np.ndarray
+    temp: np.ndarray
+    dt: float
+    _cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def through_markov(self, u: np.ndarray, beta: float) -> np.ndarray:
+        """Response of dx/dt = -beta x + u(t) to the input ``u`` (linear between samples).
+
+        Starts in equilibrium with the first input, ``x_0 = u_0 / beta`` (the gyro has
+        soaked at the starting temperature), and is exact for piecewise-linear ``u``.
+        """
+        phi, a0, a1 = foh_weights(beta, self.dt)
+        return first_order_response(np.ascontiguousarray(u, dtype=float), phi, a0, a1,
+                                    float(u[0]) / beta)
+
+    def effective_temp(self, p: P) -> np.ndarray:
+        """The temperature that drives the drift: T, changed by every ``modifier`` term
+        whose parameters ``p`` holds (:meth:`Term.modify_temperature`; ``temp_lag``: T
+        lagged by τ)."""
+        from .terms import TERMS  # the registry (terms.py builds on this module)
+
+        T = self.temp
+        for cls in TERMS.values():
+            if cls.role == "modifier" and cls.params and all(
+                    f"{cls.name}.{q.name}" in p for q in cls.params):
+                T = cls().modify_temperature(p, self, T)
+        return T
+
+    @property
+    def temp_rate(self) -> np.ndarray:
+        """dT/dt (degC/s), robust to sensor noise and quantisation.
+
+        A naive difference of 0.05-degC steps is mostly quantisation noise; a local
+        quadratic least-squares fit over ``RATE_WINDOW_S`` (Savitzky-Golay derivative)
+        is exact on ramps and averages the steps out (noise std ≈ q/√12 · √(12/W³)).
+        """
+        if "rate" not in self._cache:
+            n = self.temp.size
+            w = int(round(RATE_WINDOW_S / self.dt)) | 1
+            w = min(w, n if n % 2 else n - 1)
+            if w < 5:
+                rate = np.gradient(self.temp, self.dt) if n > 1 else np.zeros(n)
+            else:
+                from scipy.signal import savgol_filter  # scipy.signal imports scipy.stats
+
+                rate = savgol_filter(self.temp, w, 2, deriv=1, delta=self.dt, mode="interp")
+            self._cache["rate"] = rate
+        return self._cache["rate"]
+
+
+#: where a term enters the model: a random ``process`` (a state of its own), the white
+#: measurement ``noise``, an ``input`` of the drift's dynamics (u(T) into dε/dt), an
+#: ``output`` effect added to the measurement, or a ``modifier`` of another term's input
+#: (a lag of the temperature)
+ROLES = ("process", "noise", "input", "output", "modifier")
+#: the null hypothesis of a candidate test of the term: an ``interior`` point (χ²(df)), on
+#: the ``boundary`` of the parameter space (a noise intensity 0: ½χ²(0) + ½χ²(df), Self &
+#: Liang 1987), or with a ``nuisance`` parameter not identified under it (a time constant
+#: when the amplitude is 0, Davies 1987: one more df, no halving)
+NULLS = ("interior", "boundary", "nuisance")
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Scales of the data an uninformative prior is set on: the drift ``y`` (its unit),
+    the temperature ``T`` (degC) and the largest plausible rate ``rate`` (1/s, 1/Δt)."""
+
+    y: float
+    T: float
+    rate: float
+
+
+class Bin:
+    """What an online filter knows at its newest bin, from that bin and earlier ones only:
+    the time ``t`` (s) since its first bin, the temperature ``T`` (degC) and the causal
+    temperature rate (degC/s, computed on first use by ``rate_of()``)."""
+
+    __slots__ = ("t", "T", "_rate_of", "_rate")
+
+    def __init__(self, t: float, T: float, rate_of: Callable[[], float]):
+        self.t, self.T, self._rate_of = t, T, rate_of
+        self._rate: float | None = None
+
+    @property
+    def rate(self) -> float:
+        if self._rate is None:
+            self._rate = self._rate_of()
+        return self._rate
+
+
+class Term:
+    """Base class. A subclass sets ``name``, ``params``, ``role`` and overrides what it
+    contributes; every fact gyrostand needs about the effect lives here.
+
+    Class attributes: ``requires`` (terms it needs in the model), ``n_states`` (stochastic
+    states it adds), ``math`` (its equation, for reports), ``role`` (:data:`ROLES`),
+    ``bit`` (its bit in the CAN summary's ``ModelTerms``; a plugin's is assigned after the
+    built-ins when not set), ``null`` (:data:`NULLS`), ``look_alikes`` (term -> the
+    temperature profile that tells the two apart), ``no_signature`` (why the term has no
+    deterministic signature for the residual cross-correlation; empty: it has one),
+    ``signature_needs`` (parameters of the fitted model its signature uses),
+    ``constant`` (its regressor is identically 1: the converging LKF enters it as an input
+    of the drift, see :mod:`gyrostand.core.lkf_relin`).
+    """
+
+    name: ClassVar[str]
+    params: ClassVar[tuple[Param, ...]] = ()
+    requires: ClassVar[tuple[str, ...]] = ()
+    n_states: ClassVar[int] = 0
+    math: ClassVar[str] = ""
+    role: ClassVar[str] = "output"
+    bit: ClassVar[int | None] = None
+    null: ClassVar[str] = "interior"
+    look_alikes: ClassVar[Mapping[str, str]] = {}
+    no_signature: ClassVar[str] = ""
+    signature_needs: ClassVar[tuple[str, ...]] = ()
+    constant: ClassVar[bool] = False
+
+    def key(self, short: str) -> str:
+        return f"{self.name}.{short}"
+
+    @property
+    def linear(self) -> tuple[str, ...]:
+        """Full names of the parameters the model is linear in."""
+        return tuple(self.key(q.name) for q in self.params if q.kind == "linear")
+
+    # ---- batch: the model's regressors and states ---------------------------------------
+    def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
+        """Regressor column of each linear parameter, keyed by full name.
+
+        An input term's regressor is its input through the drift's dynamics,
+        ``X = ∫ e^{−β(t−s)} u(T_L(s)) ds`` (:meth:`input` of the effective temperature).
+        """
+        if self.role == "input":
+            (lin,) = self.linear
+            u = self.input(ctx.effective_temp(p))
+            return {lin: ctx.through_markov(u, p["markov.beta"])}
+        return {}
+
+    def states(self, p: P, dt: float) -> list[tuple[float, float, float]]:
+        """``(phi, q, p0)`` of each stochastic state this term adds."""
+        return []
+
+    def measurement_var(self, p: P) -> float:
+        return 0.0
+
+    def modify_temperature(self, p: P, ctx: Context, T: np.ndarray) -> np.ndarray:
+        """A ``modifier`` term's change of the temperature that drives the drift's inputs."""
+        raise ModelError(f"term {self.name!r} (role {self.role}) does not modify the "
+                         "temperature")
+
+    # ---- online: the linearised Kalman filter -------------------------------------------
+    def input(self, T):
+        """An input term's input u(T) (float or array), entering dε/dt as θ·u."""
+        raise ModelError(f"term {self.name!r} (role {self.role}) has no input u(T)")
+
+    def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
+        """An output term's regressor value of each linear parameter at the newest bin,
+        from that bin and earlier ones only (``p`` holds the held parameters)."""
+        raise ModelError(f"term {self.name!r} defines no causal regressor "
+                         "(causal_regressors): the online LKF cannot use it; use ml")
+
+    def lkf_unsupported(self) -> str:
+        """Why the LKF cannot represent this term ('' when it can)."""
+        if self.role == "modifier":
+            return "it modifies another term's input through a time constant"
+        if self.role == "input":
+            ok = type(self).input is not Term.input and len(self.linear) == 1
+            return "" if ok else "an input term needs one linear parameter and input()"
+        if self.role == "output":
+            ok = type(self).causal_regressors is not Term.causal_regressors
+            return "" if ok else "it defines no causal regressor (causal_regressors)"
+        if self.role == "process":
+            return "" if self.n_states == 1 else "the LKF stacks one state per process"
+        return ""
+
+    def prior_std(self, s: Scales) -> dict[str, float]:
+        """Uninformative prior std of each coefficient the LKF estimates, on the scale of
+        the data. Default: 10·|y| for a coefficient in the drift's unit ``y``."""
+        out = {}
+        for q in self.params:
+            if q.kind != "linear":
+                continue
+            if q.unit != "y":
+                raise ModelError(f"term {self.name!r}: no prior scale for {self.key(q.name)} "
+                                 f"(unit {q.unit}); define prior_std()")
+            out[self.key(q.name)] = 10 * s.y
+        return out
+
+    # ---- maximum likelihood ---------------------------------------------------------------
+    def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
+        """ML's start grid of a searched parameter: values of a rate (1/s) or a time (s);
+        of a noise level, its ratio to the reference noise level."""
+        if q.kind == "time":
+            return list(np.geomspace(10 * dt, duration / 3, 4))
+        if q.kind == "rate":
+            return list(np.geomspace(3.0 / duration, 0.3 / dt, 4))
+        return [0.3, 3.0]
+
+    # ---- diagnosis ------------------------------------------------------------------------
+    def signature(self, p: P, ctx: Context) -> np.ndarray:
+        """The term's signature in the data (before filtering), for the cross-correlation
+        of the residuals: by default the regressor of its one linear parameter."""
+        lin = self.linear
+        if self.no_signature or len(lin) != 1 or self.role not in ("input", "output"):
+            raise ModelError(f"term {self.name!r} has no diagnostic signature: define "
+                             "signature(), or say why not in no_signature")
+        return self.regressors(p, ctx)[lin[0]]
+
+    def __repr__(self) -> str:
+        return self.name
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Term) and other.name == self.name
+
+    def __hash__(self) -> int:
+        return hash(self.name)
+
+
