@@ -1,4 +1,5 @@
-"""Bins of Δt from frame timestamps, and the ``samples.csv`` writer.
+"""Bins of Δt from frame timestamps (the numerics; ``samples.csv`` is written and read by
+:mod:`gyrostand.runfolder`, whose writer and reader are re-exported here).
 
 Bin k covers ``[t0 + k·Δt, t0 + (k+1)·Δt)``; ``t0`` is the configured epoch, or else the
 first timestamp seen (any gyro) floored to a multiple of Δt, so every gyro shares one grid.
@@ -20,20 +21,17 @@ from __future__ import annotations
 
 import logging
 import math
-import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import NamedTuple, TextIO
+from typing import NamedTuple
 
-from gyrostand.errors import DataError, OutputError
+# the run folder's samples table and durable writes (kept importable from here)
+from gyrostand.runfolder import SAMPLES_COLUMNS, SamplesWriter, datasync, read_samples_csv
 
 __all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS",
            "datasync"]
 
 log = logging.getLogger(__name__)
-
-SAMPLES_COLUMNS = ("t", "drift", "temp", "n_drift", "n_temp")
 
 
 class Bin(NamedTuple):
@@ -204,111 +202,3 @@ class Binner:
 
     def stats(self) -> BinStats:
         return BinStats(self._bins, self._gaps, self._late, self._jumps)
-
-
-def datasync(fd: int) -> None:
-    """``fdatasync`` where the OS has it (Linux), else ``fsync``: the file's data is on the
-    disk itself, not only in the OS's cache (it survives a power cut)."""
-    getattr(os, "fdatasync", os.fsync)(fd)
-
-
-class SamplesWriter:
-    """Write each gyro's bins to ``<run_dir>/<gyro>/samples.csv`` with columns
-    ``t, drift, temp, n_drift, n_temp`` (t = bin start, s; NaN written as ``nan``; floats
-    in Python's shortest round-trip form, so a file read back gives the same floats).
-
-    Rows are held in memory until :meth:`flush` (or until ``max_pending`` rows wait), which
-    first calls ``before_flush`` (the live daemon passes the raw recorder's flush) and then
-    writes every file. So a row reaches the disk only after every frame it was binned
-    from: a row on disk is *acknowledged*, and the raw log replays to it. ``append``
-    continues existing files (a resumed run) instead of starting them over.
-    """
-
-    def __init__(self, run_dir: str | Path, gyros: Sequence[str], *,
-                 before_flush: Callable[[], None] | None = None, max_pending: int = 4096,
-                 append: bool = False, sync: bool = False) -> None:
-        self.sync = sync  # fdatasync each file after writing it (see flush)
-        self.paths: dict[str, Path] = {}
-        self._files: dict[str, TextIO] = {}
-        self._pending: dict[str, list[str]] = {}
-        self.before_flush = before_flush
-        self.max_pending = int(max_pending)
-        self._n_pending = 0
-        self.rows = 0  # rows written to disk by this writer
-        for name in gyros:
-            path = Path(run_dir) / name / "samples.csv"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fresh = not (append and path.is_file() and path.stat().st_size > 0)
-            f = path.open("w" if fresh else "a", newline="", encoding="utf-8")
-            if fresh:
-                f.write(",".join(SAMPLES_COLUMNS) + "\n")
-                f.flush()
-            self.paths[name], self._files[name], self._pending[name] = path, f, []
-
-    def write(self, bins: Iterable[Bin]) -> None:
-        for b in bins:
-            self._pending[b.gyro].append(
-                f"{b.t!r},{b.drift!r},{b.temp!r},{b.n_drift},{b.n_temp}\n")
-            self._n_pending += 1
-        if self._n_pending >= self.max_pending:
-            self.flush()
-
-    def flush(self) -> None:
-        """``before_flush()``, then every pending row to disk (one write per file; with
-        ``sync``, each file is fdatasync'ed after its write).
-        Raises :class:`~gyrostand.errors.OutputError` naming the file that failed."""
-        if self.before_flush is not None:
-            self.before_flush()
-        for name, rows in self._pending.items():
-            if not rows:
-                continue
-            f = self._files[name]
-            try:
-                f.write("".join(rows))
-                f.flush()
-                if self.sync:
-                    datasync(f.fileno())
-            except OSError as exc:
-                raise OutputError(f"{self.paths[name]}: cannot write: "
-                                  f"{exc.strerror or exc}") from exc
-            self.rows += len(rows)
-            rows.clear()
-        self._n_pending = 0
-
-    def close(self) -> None:
-        try:
-            self.flush()
-        finally:
-            for f in self._files.values():
-                try:
-                    f.close()
-                except OSError:  # the unwritable tail is lost; flush() said so
-                    pass
-
-    def __enter__(self) -> SamplesWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
-def read_samples_csv(path: str | Path) -> dict[str, list[float]]:
-    """Read a ``samples.csv`` back as columns of floats (counts as floats too).
-
-    A last line without its line end is torn (the writer was killed or the disk filled
-    mid-line): it is left out with a warning."""
-    with Path(path).open(newline="", encoding="utf-8") as f:
-        text = f.read()
-    lines = text.split("\n")
-    if lines[-1]:
-        log.warning("%s: torn last line left out: %r", path, lines[-1][:80])
-    rows = [r.split(",") for r in lines[:-1]]
-    if not rows:
-        raise DataError(f"{path}: empty file (expected the header {','.join(SAMPLES_COLUMNS)})")
-    header, body = rows[0], rows[1:]
-    if tuple(header) != SAMPLES_COLUMNS:
-        raise DataError(f"{path}: unexpected columns {header}")
-    try:
-        return {name: [float(r[i]) for r in body] for i, name in enumerate(header)}
-    except (ValueError, IndexError) as exc:
-        raise DataError(f"{path}: not a samples file ({exc})") from None

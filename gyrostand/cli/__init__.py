@@ -14,6 +14,7 @@ from .. import __version__
 from ..errors import GyrostandError
 from . import (
     allan,
+    batch,
     demo,
     design,
     diagnose,
@@ -28,7 +29,7 @@ from . import (
 )
 
 SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export, design)
+               export, design, batch)
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 

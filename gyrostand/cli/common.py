@@ -1,13 +1,17 @@
-"""Options, printing and argument types shared by the run/replay/simulate/demo subcommands."""
+"""Options, printing and argument types shared by the subcommands: the bus options, the
+output format (``--format text|json|html``, ``--json``), argument types."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import math
+import sys
 from collections.abc import Callable
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, TextIO
+
+from ..render import FORMATS
 
 if TYPE_CHECKING:
     from ..config import SessionConfig
@@ -52,23 +56,35 @@ def with_bus_overrides(cfg: SessionConfig, args: argparse.Namespace) -> SessionC
     return dataclasses.replace(cfg, bus=MappingProxyType({**cfg.bus, **over}))
 
 
-def print_outcome(outcome: RunOutcome, out: TextIO,
-                  truths: dict[str, dict[str, float]] | None = None) -> None:
-    """The final table of every gyro, the counts, and the paths."""
-    from ..session.final import result_table
+def add_format_args(p: Any, what: str = "the result", default: str = FORMATS[0],
+                    verb: str = "print") -> None:
+    """``--format text|json|html`` and ``--json``, its synonym."""
+    p.add_argument("--format", choices=FORMATS, default=default,
+                   help=f"{verb} {what} as text, JSON or an HTML page (default {default})")
+    p.add_argument("--json", dest="format", action="store_const", const="json",
+                   help="same as --format json")
 
-    dec = outcome.stats.get("decoder", {})
-    print(f"stopped: {outcome.stop_reason} (state {outcome.state}); frames "
-          f"{dec.get('received', 0)} received, {dec.get('decoded', 0)} decoded, "
-          f"{dec.get('rejected_total', 0)} rejected", file=out)
-    for f in outcome.finals:
-        print(f"\ngyro {f.gyro}: {f.bins} bins, {f.gaps} gaps", file=out)
-        print(result_table(f, (truths or {}).get(f.gyro)), file=out)
-    print(f"\nrun folder: {outcome.run_dir}", file=out)
-    for label, path in (("result:    ", outcome.result_json), ("report:    ", outcome.report)):
-        print(f"{label} {path}" if path.is_file() else f"{label} not written", file=out)
-    for err in outcome.stats.get("unwritten", []):
-        print(f"error: {err}", file=out)
+
+def emit(obj: Any, format: str, out: TextIO | None = None) -> None:
+    """Print ``obj`` rendered in ``format`` (:mod:`gyrostand.render`)."""
+    from ..render import render
+
+    (out or sys.stdout).write(render(obj, format))
+
+
+def progress(args: argparse.Namespace) -> TextIO:
+    """Where a command's progress lines go: stdout beside a text result, stderr when the
+    result is a JSON or HTML document (which stdout then holds alone)."""
+    return sys.stdout if getattr(args, "format", "text") == "text" else sys.stderr
+
+
+def print_outcome(outcome: RunOutcome, out: TextIO,
+                  truths: dict[str, dict[str, float]] | None = None,
+                  format: str = "text") -> None:
+    """The final table of every gyro, the counts, and the paths."""
+    from ..render.views import RunSummary
+
+    emit(RunSummary(outcome, truths or {}), format, out)
 
 
 def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[str], float]:

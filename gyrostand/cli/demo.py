@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
-from .common import add_bus_args, print_outcome, with_bus_overrides
+from .common import add_bus_args, add_format_args, print_outcome, progress, with_bus_overrides
 
 #: where the demo config lives: the repository next to the package, else the cwd
 CANDIDATES = (Path(__file__).resolve().parents[2] / "configs" / "demo.yaml",
@@ -37,6 +37,7 @@ def add_parser(sub: Any) -> None:
                    help="parent folder under which the run folder <name>-<UTC time>/ is "
                         "made (default: session.output)")
     add_bus_args(p)
+    add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
 
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
           f"{' -> '.join(f'{T:g}' for _, T in sim.temperature)} degC over "
           f"{sim.duration or sim.temperature[-1][0]:g} s; truth "
           + "; ".join(f"{g}: " + ", ".join(f"{k}={v:g}" for k, v in p.items())
-                      for g, p in truths.items()), flush=True)
+                      for g, p in truths.items()), file=progress(args), flush=True)
     ready, stop = threading.Event(), threading.Event()
     stand = SimulatedStand(cfg, simulated_frames(cfg), ready, stop)
     stand.start()
@@ -70,8 +71,9 @@ def run(args: argparse.Namespace) -> int:
     ack = stand.ack
     print(f"simulated stand sent {stand.sent} frames; daemon ran {wall:.1f} s wall for "
           f"{sim.duration or sim.temperature[-1][0]:g} s of frame time; stop "
-          + ("acknowledged" if ack and ack.get("Result") == 0 else "not acknowledged"))
-    print_outcome(outcome, sys.stdout, truths)
+          + ("acknowledged" if ack and ack.get("Result") == 0 else "not acknowledged"),
+          file=progress(args))
+    print_outcome(outcome, sys.stdout, truths, format=args.format)
     if outcome.ok:
         # the workbench's page on the run: model vs measurements, residuals, candidates
         from ..report import write_report
@@ -79,5 +81,5 @@ def run(args: argparse.Namespace) -> int:
 
         for f in outcome.finals:
             page = write_report(open_subject(outcome.run_dir, gyro=f.gyro))
-            print(f"html report ({f.gyro}): {page}")
+            print(f"html report ({f.gyro}): {page}", file=progress(args))
     return 0 if outcome.ok else 1

@@ -1,17 +1,15 @@
-"""``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S] [--json]
-[--variant relin|paper]``."""
+"""``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S]
+[--format text|json|html] [--variant relin|paper]``."""
 
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from typing import Any
 
 from ..core import registry
 from ..core.names import LKF_VARIANTS, METHODS, VOCABULARY
 from ..errors import ConfigError
-from .common import number
+from .common import add_format_args, emit, number
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -32,7 +30,7 @@ def add_parser(sub: Any) -> None:
                         "included")
     p.add_argument("--sigma", type=number(positive=True), default=None,
                    help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
-    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_format_args(p)
     g = p.add_argument_group("lsq options")
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
                    help="lsq regressor Y_{k-1} (standard, default) or Y_k (the paper's text)")
@@ -70,9 +68,5 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
                           f"{1.0 / samples.dt:g} of {args.samples}")
     result = registry.get(args.method).fit(samples, model, opts)
-    if args.json:
-        json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(result.summary())
+    emit(result, args.format)
     return 0

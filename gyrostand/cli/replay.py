@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CanEdgeError
-from .common import number, print_outcome
+from .common import add_format_args, number, print_outcome
 
 
 def add_parser(sub: Any) -> None:
@@ -32,6 +32,7 @@ def add_parser(sub: Any) -> None:
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "
                         "(default): a process for logs of 1 MiB or more with 2+ CPUs, unless --realtime")
+    add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
 
@@ -54,5 +55,5 @@ def run(args: argparse.Namespace) -> int:
     outcome = run_replay(cfg, logs[0] if len(logs) == 1 else logs, out=args.out,
                          realtime=args.realtime, speed=args.speed,
                          parallel={"auto": None, "process": True, "inline": False}[args.reader])
-    print_outcome(outcome, sys.stdout)
+    print_outcome(outcome, sys.stdout, format=args.format)
     return 0

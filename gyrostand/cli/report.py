@@ -1,11 +1,12 @@
-"""``gyrostand report RUN``: one HTML page with PNG plots of the current model; prints its
-path."""
+"""``gyrostand report RUN [--format html|text|json]``: one HTML page with PNG plots of the
+current model (or the diagnosis as ``report.txt`` / ``report.json``); prints its path."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
+from .common import add_format_args
 from .workbench_args import add_subject_args, subject_of
 
 
@@ -16,11 +17,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", default=None, metavar="DIR",
                    help="folder of the report (default: report-<gyro>/ in the run folder, or "
                         "beside the CSV)")
+    add_format_args(p, "the report", default="html", verb="write")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..report import write_report  # matplotlib only when a report is asked for
 
-    print(write_report(subject_of(args), args.out))
+    print(write_report(subject_of(args), args.out, format=args.format))
     return 0

@@ -7,7 +7,14 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from .common import add_bus_args, number, print_outcome, with_bus_overrides
+from .common import (
+    add_bus_args,
+    add_format_args,
+    number,
+    print_outcome,
+    progress,
+    with_bus_overrides,
+)
 
 if TYPE_CHECKING:
     from ..config import SessionConfig
@@ -39,6 +46,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--check", action="store_true",
                    help="validate the session file (keys, DBC, signal mapping, response "
                         "frames) and print what it maps, without opening the bus")
+    add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
 
@@ -52,14 +60,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     def ready(run_dir) -> None:
-        print(f"ready: {run_dir}", flush=True)
+        print(f"ready: {run_dir}", file=progress(args), flush=True)
 
     def waiting(text: str) -> None:
-        print(f"waiting: {text}", flush=True)
+        print(f"waiting: {text}", file=progress(args), flush=True)
 
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
                        on_ready=ready, resume=args.resume, on_waiting=waiting)
-    print_outcome(outcome, sys.stdout)
+    print_outcome(outcome, sys.stdout, format=args.format)
     return 0 if outcome.ok else 1
 
 

@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-from ..errors import DataError
 
 if TYPE_CHECKING:
     from ..workbench import Subject
@@ -36,40 +32,17 @@ def subject_of(args: argparse.Namespace) -> Subject:
 
 
 def check_run_folder(path: Path) -> None:
-    """A run folder's ``result.json`` has the shape the workbench reads (an object, ``dt``
-    a positive number, ``gyros`` an object of objects whose ``model`` is a list of term
-    names), else a :class:`DataError` naming the file and the key."""
-    result = path / "result.json"
-    if not (path.is_dir() and result.is_file()):
-        return  # a CSV, or open_subject says what is missing
-    try:
-        info = json.loads(result.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{result}: not UTF-8 text (byte {exc.start})") from None
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{result}: line {exc.lineno}: invalid JSON ({exc.msg})") from None
-    except OSError as exc:
-        raise DataError(f"{result}: cannot read: {exc.strerror or exc}") from None
-    if not isinstance(info, dict):
-        raise DataError(f"{result}: expected a JSON object, got {type(info).__name__}")
-    dt = info.get("dt", 1.0)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (
-            math.isfinite(dt) and dt > 0):
-        raise DataError(f"{result}: dt: expected a positive number of seconds, got "
-                        f"{str(dt)[:40]!r}")
-    gyros = info.get("gyros", {})
-    if not isinstance(gyros, dict) or not all(isinstance(g, dict) for g in gyros.values()):
-        raise DataError(f"{result}: gyros: expected an object of gyro objects")
-    for name, g in gyros.items():
-        model = g.get("model", [])
-        if not (isinstance(model, list) and all(isinstance(m, str) for m in model)):
-            raise DataError(f"{result}: gyros.{str(name)[:40]}.model: expected a list of "
-                            f"term names")
+    """A run folder's ``result.json`` has the shape the workbench reads, else a
+    :class:`DataError` naming the file and the key (:func:`gyrostand.runfolder.read_result`)."""
+    from ..runfolder import RESULT, read_result
+
+    if path.is_dir() and (path / RESULT).is_file():  # else a CSV, or open_subject says
+        read_result(path)
 
 
 def fmt_estimate(value: float, std: float, unit: str, fixed: bool = False,
                  drift_unit: str = "y") -> str:
-    from ..core.results import unit_text
+    """``value ± std unit`` (:func:`gyrostand.render.text.estimate`)."""
+    from ..render.text import estimate
 
-    sd = "fixed" if fixed else f"± {std:.3g}"
-    return f"{value:.6g} {sd} {unit_text(unit, drift_unit)}"
+    return estimate(value, std, unit, fixed, drift_unit)

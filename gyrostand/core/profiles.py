@@ -45,11 +45,21 @@ class TemperatureProfile:
         return self.times[-1]
 
     def __call__(self, t: np.ndarray | float) -> np.ndarray:
-        """Temperature at ``t`` (s), degC."""
+        """Temperature at ``t`` (s), degC: linear between breakpoints, held outside.
+
+        >>> p = paper_profile()
+        >>> [float(x) for x in p([0.0, 250.0, 750.0, 1500.0, 9999.0])]
+        [20.0, 32.5, 45.0, 40.0, 35.0]
+        """
         return np.interp(np.asarray(t, dtype=float), self.times, self.temps)
 
     def grid(self, dt: float = 1.0, duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Sample times ``0, dt, ..., duration`` and the temperatures there."""
+        """Sample times ``0, dt, ..., duration`` and the temperatures there.
+
+        >>> t, temp = paper_profile().grid(dt=500.0)
+        >>> t.tolist(), temp.tolist()
+        ([0.0, 500.0, 1000.0, 1500.0, 2000.0], [20.0, 45.0, 45.0, 40.0, 35.0])
+        """
         end = self.duration if duration is None else duration
         t = self.times[0] + dt * np.arange(int(round((end - self.times[0]) / dt)) + 1)
         return t, self(t)

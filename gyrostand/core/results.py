@@ -144,25 +144,14 @@ class FitResult:
         return d
 
     def summary(self) -> str:
-        """A readable table with units."""
-        lines = [
-            f"method {self.method}   model {','.join(self.model.names)}   "
-            f"samples {self.n_observed}/{self.n_samples} (dt {self.dt:g} s)",
-            f"data   {self.source}",
-            "",
-            f"{'parameter':<16} {'value':>14} {'std':>12}  unit",
-        ]
-        for k, e in self.parameters.items():
-            std = "fixed" if e.fixed else f"{e.std:12.4g}"
-            lines.append(f"{k:<16} {e.value:14.6g} {std:>12}  {UNIT_TEXT.get(e.unit, e.unit)}")
-        lines.append("")
-        if self.loglik is not None:
-            lines.append(f"log-likelihood {self.loglik:.6f}")
-        lines.append(f"residual RMS   {self.residual_rms:.6g} y")
-        lines.append("(y = the drift's unit, e.g. deg/h)")
-        for w in self.warnings:
-            lines.append(f"warning: {w}")
-        return "\n".join(lines)
+        """A readable table with units (:func:`gyrostand.render.text.fit_result`).
+
+        The text renderer lives a layer above the core: imported when called (by name, so
+        that neither loading the core nor type-checking it pulls the upper layers in)."""
+        import importlib
+
+        text = importlib.import_module("gyrostand.render.text")
+        return str(text.fit_result(self))
 
 
 def _jsonable(v: Any) -> bool:

@@ -12,8 +12,6 @@
 
 from __future__ import annotations
 
-import csv
-import json
 import logging
 import math
 from collections.abc import Mapping, Sequence
@@ -27,7 +25,8 @@ from ..core.candidates import Report, fit_error
 from ..core.data import Samples
 from ..core.lkf import estimated_names, held_names, lkf, lkf_layout
 from ..core.ml import ml
-from ..errors import DataError, GyrostandError
+from ..errors import GyrostandError
+from ..runfolder import estimates_path, read_estimates_csv, read_result_or_none
 from ..workbench import Subject, read_ledger
 
 log = logging.getLogger(__name__)
@@ -129,34 +128,17 @@ class Convergence:
 
 
 def read_estimates(path: Path, t0: float | None = None) -> list[Convergence]:
-    """The run's online estimates: ``t, <id>:<param>, <id>:<param>:std, ..., <id>:status``.
+    """The run's online estimates: ``t, <id>:<param>, <id>:<param>:std, ..., <id>:status``
+    (read by :func:`gyrostand.runfolder.read_estimates_csv`: a torn last line is left out).
 
     Parameters whose std is never positive (held values) are left out (listed in ``held``).
     """
-    with path.open(newline="", encoding="utf-8") as fh:
-        text = fh.read()
-    # a last line without its line end is torn (the run was killed while appending it)
-    rows = list(csv.reader(text.split("\n")[:-1] if not text.endswith("\n") else
-                           text.splitlines()))
-    if not rows or not rows[0] or rows[0][0] != "t":
-        raise DataError(f"{path}: not an estimates file (the header must start with t)")
-    header, body = rows[0], [r for r in rows[1:] if len(r) == len(rows[0])]
-    if not body:
+    cols = {k: np.asarray(v, dtype=object if k.endswith(":status") else float)
+            for k, v in read_estimates_csv(path).items()}
+    if not len(cols["t"]):
         return []
-    cols = {name: i for i, name in enumerate(header)}
-
-    def column(name: str) -> np.ndarray:
-        i = cols[name]
-        out = np.empty(len(body))
-        for k, r in enumerate(body):
-            try:
-                out[k] = float(r[i])
-            except ValueError:
-                out[k] = np.nan
-        return out
-
-    t = column("t")
-    t = t - (t0 if t0 is not None else t[0])
+    t = cols["t"] - (t0 if t0 is not None else cols["t"][0])
+    header = list(cols)
     idents = list(dict.fromkeys(h.split(":")[0] for h in header[1:] if h.count(":") == 1
                                 and not h.endswith(":status")))
     out = []
@@ -166,7 +148,7 @@ def read_estimates(path: Path, t0: float | None = None) -> list[Convergence]:
             parts = h.split(":")
             if len(parts) != 2 or parts[0] != ident or parts[1] == "status":
                 continue
-            v, s = column(h), column(h + ":std") if h + ":std" in cols else None
+            v, s = cols[h], cols.get(h + ":std")
             if s is None or not np.any(np.nan_to_num(s) > 0):
                 held.append(parts[1])
                 continue
@@ -220,15 +202,19 @@ def _ml_windows(samples: Samples, report: Report) -> Convergence:
 def convergence(subject: Subject, report: Report) -> tuple[list[Convergence], str]:
     """Estimates over time, and a sentence saying where they come from."""
     if subject.run_dir is not None:
-        path = subject.run_dir / subject.gyro / "estimates.csv"
+        path = estimates_path(subject.run_dir, subject.gyro)
         if path.exists():
             t0 = None
             try:
-                info = json.loads((subject.run_dir / "result.json").read_text())
-                t0 = float(info["gyros"][subject.gyro]["t0"])
-            except (OSError, ValueError, KeyError, TypeError):
+                t0 = float(read_result_or_none(subject.run_dir)["gyros"][subject.gyro]["t0"])
+            except (ValueError, KeyError, TypeError):
                 pass
-            conv = read_estimates(path, t0)
+            try:
+                conv = read_estimates(path, t0)
+            except GyrostandError as exc:  # damaged: the report shows the LKF pass instead
+                log.warning("convergence: the run's online estimates are unreadable (%s)",
+                            exc)
+                conv = []
             if conv:
                 model = _run_model(subject)
                 return conv, (f"the run's online estimates ({path.name}) of its configured "
@@ -246,9 +232,9 @@ def convergence(subject: Subject, report: Report) -> tuple[list[Convergence], st
 
 def _run_model(subject: Subject) -> str:
     try:
-        info = json.loads((subject.run_dir / "result.json").read_text())  # type: ignore[operator]
+        info = read_result_or_none(subject.run_dir)  # type: ignore[arg-type]
         return ",".join(info["gyros"][subject.gyro]["model"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError):
         return "(unknown)"
 
 

@@ -24,7 +24,6 @@ clear error naming the extra.
 from __future__ import annotations
 
 import datetime as dt
-import json
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,12 +32,18 @@ from typing import Any
 
 import numpy as np
 
-from ..can.binning import SAMPLES_COLUMNS, read_samples_csv
 from ..can.bus import STATUS_CODES
 from ..core.model import Model
 from ..core.results import UNIT_TEXT
 from ..errors import DataError, GyrostandError, OutputError
-from .outputs import read_estimates_csv
+from ..runfolder import (
+    SAMPLES_COLUMNS,
+    estimates_path,
+    read_estimates_csv,
+    read_result,
+    read_samples_csv,
+    samples_path,
+)
 
 __all__ = ["ExportError", "RunTables", "read_run_tables", "export_parquet", "export_mf4"]
 
@@ -82,13 +87,7 @@ def read_run_tables(run_dir: str | Path, gyros: Sequence[str] | None = None
                     ) -> tuple[dict[str, Any], list[RunTables]]:
     """``result.json`` of ``run_dir`` and, per gyro (all, or ``gyros``), its tables."""
     run_dir = Path(run_dir)
-    result = run_dir / "result.json"
-    if not result.is_file():
-        raise DataError(f"{run_dir}: not a run folder (no result.json)")
-    try:
-        info = json.loads(result.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{result}: line {exc.lineno}: invalid JSON ({exc.msg})") from None
+    info = read_result(run_dir)
     known = list(info.get("gyros", {}))
     chosen = list(gyros) if gyros else known
     for g in chosen:
@@ -97,12 +96,12 @@ def read_run_tables(run_dir: str | Path, gyros: Sequence[str] | None = None
     out = []
     for g in chosen:
         drift_unit, temp_unit = _units(run_dir, info, g)
-        raw = read_samples_csv(run_dir / g / "samples.csv")
+        raw = read_samples_csv(samples_path(run_dir, g))
         samples = {k: np.asarray(raw[k], dtype=np.int64 if k.startswith("n_") else float)
                    for k in SAMPLES_COLUMNS}
         units = {"t": "s", "drift": drift_unit, "temp": temp_unit, "n_drift": "",
                  "n_temp": ""}
-        est_path = run_dir / g / "estimates.csv"
+        est_path = estimates_path(run_dir, g)
         estimates = None
         if est_path.is_file():
             cols = read_estimates_csv(est_path)

@@ -23,7 +23,6 @@ stops the others.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -37,10 +36,10 @@ from ..config import GyroConfig, SessionConfig
 from ..core.data import Samples
 from ..core.model import Model
 from ..core.registry import REGISTRY
-from ..core.results import FitResult, unit_text
+from ..core.results import FitResult
 from ..errors import GyrostandError
+from ..runfolder import write_atomic, write_json
 from .online import LkfPoint, OnlineEstimate
-from .outputs import write_atomic
 
 __all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods",
            "write_provisional_result"]
@@ -153,7 +152,7 @@ def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path
            "run_dir": str(run_dir), "dt": cfg.sampling.dt,
            "epoch": cfg.sampling.epoch, "state": "finished",
            "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
-    write_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    write_json(path, doc)
 
 
 def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
@@ -167,111 +166,25 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
            "gyros": {g.name: {"model": list(g.model), "t0": None, "bins": 0, "gaps": 0,
                               "observed": 0, "fits": {}, "online": {}} for g in cfg.gyros},
            "stats": {"stop_reason": None}}
-    write_atomic(path, json.dumps(doc, indent=2) + "\n")
-
-
-#: the batch refit's column is left out of the table when it is the online value within
-#: this many stds for every parameter (said in a line below the table)
-SAME_SIGMA = 0.05
+    write_json(path, doc, allow_nan=True)
 
 
 def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
-    """One gyro's parameters: a column per method (value ± std), truth first if known.
+    """One gyro's parameters: a column per method (value ± std), truth first if known
+    (:func:`gyrostand.render.text.result_table`)."""
+    from ..render.text import result_table as table
 
-    ``lkf`` is the online LKF at stop (what the last CAN round sent), ``lkf_batch`` the
-    batch refit: shown only where it differs from ``lkf`` by more than ``SAME_SIGMA``."""
-    methods = list(final.fits)
-    same = _same_fit(final.fits.get("lkf"), final.fits.get("lkf_batch"))
-    if same:
-        methods.remove("lkf_batch")
-    head = f"{'parameter':<14}" + (f" {'truth':>12}" if truth else "")
-    head += "".join(f" {m:>24}" for m in methods) + "  unit"
-    lines = [head]
-    for name in final.model.param_names:
-        row = f"{name:<14}"
-        if truth:
-            row += f" {truth[name]:>12.5g}" if name in truth else f" {'':>12}"
-        unit = ""
-        for m in methods:
-            f = final.fits[m]
-            if isinstance(f, FitResult) and name in f.parameters:
-                e = f.parameters[name]
-                unit = unit_text(e.unit, final.unit)
-                cell = f"{e.value:.5g} (held)" if e.fixed else f"{e.value:.5g} ± {e.std:.2g}"
-            else:
-                cell = "—"
-            row += f" {cell:>24}"
-        lines.append(f"{row}  {unit}")
-    rms = f"{'residual RMS':<14}" + (f" {'':>12}" if truth else "")
-    for m in methods:
-        f = final.fits[m]
-        rms += f" {f.residual_rms:>24.4g}" if isinstance(f, FitResult) else f" {'—':>24}"
-    lines.append(rms)
-    lk = final.fits.get("lkf")
-    if isinstance(lk, FitResult) and lk.info.get("online"):
-        lines.append(f"lkf = the online LKF at stop ({lk.info.get('variant', 'relin')}; "
-                     f"status {lk.info.get('status')}), as sent on the bus"
-                     + ("; lkf_batch (the same filter rerun over samples.csv) agrees "
-                        f"within {SAME_SIGMA:g} std" if same else ""))
-    for m in methods:
-        f = final.fits[m]
-        if isinstance(f, str):
-            lines.append(f"{m}: failed: {f}")
-        else:
-            lines += [f"{m}: warning: {w}" for w in f.warnings]
-    return "\n".join(lines)
-
-
-def _same_fit(a: FitResult | str | None, b: FitResult | str | None) -> bool:
-    """Every parameter of ``b`` within ``SAME_SIGMA`` std of ``a``'s (held ones equal to
-    3 significant digits)."""
-    if not isinstance(a, FitResult) or not isinstance(b, FitResult):
-        return False
-    for n, e in b.parameters.items():
-        o = a.parameters.get(n)
-        if o is None:
-            return False
-        tol = SAME_SIGMA * max(e.std, o.std) if not (e.fixed or o.fixed) else \
-            1e-2 * max(abs(e.value), abs(o.value))
-        if abs(e.value - o.value) > tol:
-            return False
-    return True
+    return table(final, truth)
 
 
 def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[GyroFinal],
                  stats: Mapping[str, Any], truths: Mapping[str, Mapping[str, float]]) -> None:
-    """``report.txt``: the final table per gyro and the counts of the run."""
-    dec = stats.get("decoder", {})
-    lines = [f"gyrostand run report: session {cfg.name} ({source})", "",
-             f"frames received {dec.get('received', 0)}, decoded {dec.get('decoded', 0)}, "
-             f"ignored {dec.get('ignored', 0)}, rejected {dec.get('rejected_total', 0)}, "
-             f"bus errors {dec.get('bus_errors', 0)}, counter jumps "
-             f"{dec.get('counter_jumps', 0)}"]
-    rej = {k: v for k, v in dec.get("rejected", {}).items() if v}
-    if rej:
-        lines.append("rejected by reason: " + ", ".join(f"{k} {v}" for k, v in rej.items()))
-    b = stats.get("binner", {})
-    lines.append(f"bins {b.get('bins', 0)} (gaps {b.get('gaps', 0)}), late samples "
-                 f"{b.get('late', 0)}, refused jumps {b.get('jumps', 0)}")
-    segs = stats.get("segments") or []
-    if len(segs) > 1:  # a resumed run: the counts above are the last segment's
-        tot = stats.get("run_totals", {})
-        td, tb = tot.get("decoder", {}), tot.get("binner", {})
-        lines.append(f"(the counts above are the last segment's) whole run, {len(segs)} "
-                     f"raw segments: frames received {td.get('received', 0)}, decoded "
-                     f"{td.get('decoded', 0)}, rejected {td.get('rejected_total', 0)}; bins "
-                     f"{tb.get('bins', 0)} (gaps {tb.get('gaps', 0)})")
-        for seg in segs:
-            sd = seg.get("decoder", {})
-            lines.append(f"  {seg.get('raw')}: {seg.get('state')}"
-                         f"{' (' + seg['ended_by'] + ')' if seg.get('ended_by') else ''}, "
-                         f"decoded {sd.get('decoded', 0)}, rows {seg.get('rows_written', 0)}")
-    for f in finals:
-        lines += ["", f"gyro {f.gyro}: model {','.join(f.model.names)}; {f.bins} bins, "
-                      f"{f.gaps} gaps, {f.observed} observed", ""]
-        lines.append(result_table(f, truths.get(f.gyro)))
-    lines += ["", "(y = the drift's unit, e.g. deg/h; ± one standard deviation)"]
-    write_atomic(path, "\n".join(lines) + "\n")
+    """``report.txt``: the final table per gyro and the counts of the run
+    (:func:`gyrostand.render.text.run_report`)."""
+    from ..render import render
+    from ..render.views import RunReport
+
+    write_atomic(path, render(RunReport(cfg.name, source, finals, stats, truths), "text"))
 
 
 def _finite(x: float) -> float | None:

@@ -38,6 +38,7 @@ from types import TracebackType
 from typing import Any
 
 from ..can.binning import Bin, Binner, SamplesWriter
+from ..can.bus import COMMANDS
 from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
@@ -215,9 +216,12 @@ class Pipeline:
                 log.error("command %s failed: %s", values, exc)
 
     def _command_name(self, code: int) -> str | None:
-        """The command a decoded ``Command`` code means (the command message's value
-        table), None for a code it does not list."""
-        return self.encoder.command_name(self.cfg.responses.command, code)
+        """The command a decoded ``Command`` code means, in the numbering of the DBC's
+        command message (its value table); the project's numbering without one."""
+        ref = self.cfg.responses.command
+        if ref is None:
+            return COMMANDS.get(code)
+        return self.encoder.command_name(ref, code)
 
     def _reset(self, _t: float) -> None:
         """``reset``: the online identifiers restart at the next bin."""

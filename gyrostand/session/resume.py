@@ -2,7 +2,7 @@
 
 What a resumed run keeps: every *acknowledged* 1-s sample (a row of ``<gyro>/samples.csv``
 on disk; the daemon writes a row only after the raw log holds every frame it was binned
-from, see :class:`~gyrostand.can.binning.SamplesWriter`), the online estimates of those
+from, see :class:`~gyrostand.runfolder.SamplesWriter`), the online estimates of those
 bins (``estimates.csv``), the ledger, ``run.log`` (appended) and the earlier raw segments.
 What it does:
 
@@ -15,25 +15,34 @@ What it does:
   first new frame are gaps (n = 0; at most ``sampling.max_gap`` of them, a longer pause
   shows as a jump of ``t``), older frames are late;
 * the raw log continues in a new segment, ``raw-2.blf``, ``raw-3.blf``, ...
-  (:func:`~gyrostand.session.outputs.raw_segments`); ``gyrostand replay CONFIG RUN_DIR``
+  (:func:`~gyrostand.runfolder.raw_segments`); ``gyrostand replay CONFIG RUN_DIR``
   replays them in order.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..can.binning import read_samples_csv
 from ..config import SessionConfig
 from ..core.model import Model
 from ..errors import ConfigError, OutputError
+from ..runfolder import (
+    RESULT,
+    cut_estimates_after,
+    cut_torn_tail,
+    estimate_columns,
+    estimates_path,
+    latest_run_dir,
+    next_raw_segment,
+    read_header,
+    read_result_or_none,
+    read_samples_csv,
+    samples_path,
+)
 from .online import ONLINE
-from .outputs import estimate_columns, latest_run_dir, next_raw_segment
 
 __all__ = ["ResumeState", "prepare_resume", "find_resume_dir", "check_compatible"]
 
@@ -85,11 +94,9 @@ def check_compatible(cfg: SessionConfig, run_dir: Path) -> None:
     folder's (``result.json``, each ``estimates.csv`` header): its bins, grid and
     estimate columns would no longer match. Raises :class:`ConfigError` naming the key."""
     src = cfg.path
-    doc: Any = None
-    rp = run_dir / "result.json"
-    try:
-        doc = json.loads(rp.read_text(encoding="utf-8"))
-    except (OSError, ValueError, UnicodeDecodeError):
+    rp = run_dir / RESULT
+    doc = read_result_or_none(run_dir)
+    if doc is None:
         log.warning("%s: unreadable; resuming without comparing dt and epoch", rp)
     if isinstance(doc, dict):
         dt = doc.get("dt")
@@ -109,13 +116,9 @@ def check_compatible(cfg: SessionConfig, run_dir: Path) -> None:
                 raise ConfigError(f"{src}: gyros[{i}].model: {list(g.model)} differs from "
                                   f"the run folder's {model} ({rp})")
     for i, g in enumerate(cfg.gyros):
-        ep = run_dir / g.name / "estimates.csv"
-        try:
-            with ep.open(encoding="utf-8", errors="replace") as fh:
-                header = fh.readline().rstrip("\n").split(",")
-        except OSError:
-            continue
-        if header == [""]:
+        ep = estimates_path(run_dir, g.name)
+        header = read_header(ep)
+        if header is None:
             continue
         online = [x for x in g.identifiers if x in ONLINE]
         want = estimate_columns(online, Model.parse(g.model).param_names)
@@ -129,62 +132,21 @@ def check_compatible(cfg: SessionConfig, run_dir: Path) -> None:
                               f"was started with")
 
 
-def _cut_torn_tail(path: Path) -> int:
-    """Cut a last line without line end; return the bytes removed."""
-    size = path.stat().st_size
-    if size == 0:
-        return 0
-    with path.open("rb+") as fh:
-        fh.seek(-1, os.SEEK_END)
-        if fh.read(1) == b"\n":
-            return 0
-        back = min(size, 1 << 16)
-        fh.seek(size - back)
-        tail = fh.read(back)
-        keep = size - back + tail.rfind(b"\n") + 1 if b"\n" in tail else 0
-        fh.truncate(keep)
-    log.warning("%s: cut a torn last line (%d bytes)", path, size - keep)
-    return size - keep
-
-
-def _cut_estimates_after(path: Path, t_last: float | None) -> float | None:
-    """Cut estimate rows of bins after ``t_last`` (None: keep only the header); return the
-    t of the last row kept (None when none)."""
-    with path.open("rb") as fh:
-        lines = fh.read().split(b"\n")
-    body = lines[1:-1] if lines and lines[-1] == b"" else lines[1:]
-    keep, last = len(lines[0]) + 1, None
-    for ln in body:
-        try:
-            t = float(ln.split(b",", 1)[0])
-        except ValueError:
-            break
-        if t_last is None or t > t_last:
-            break
-        keep += len(ln) + 1
-        last = t
-    if keep < path.stat().st_size:
-        with path.open("rb+") as fh:
-            fh.truncate(keep)
-        log.warning("%s: cut estimate rows after the last kept bin", path)
-    return last
-
-
 def prepare_resume(cfg: SessionConfig, run_dir: Path) -> ResumeState:
     """Check and repair the run folder's growing files; return what to continue from.
     A session that does not match the folder is refused first (:func:`check_compatible`)."""
     check_compatible(cfg, run_dir)
-    if not any((run_dir / g.name / "samples.csv").is_file() for g in cfg.gyros):
+    if not any(samples_path(run_dir, g.name).is_file() for g in cfg.gyros):
         raise OutputError(f"{run_dir}: not a run folder of session {cfg.name!r} (no "
                           f"<gyro>/samples.csv of gyros {', '.join(g.name for g in cfg.gyros)})")
     state = ResumeState(run_dir, next_raw_segment(run_dir), None)
     firsts: list[float] = []
     for g in cfg.gyros:
-        sp = run_dir / g.name / "samples.csv"
+        sp = samples_path(run_dir, g.name)
         if not sp.is_file():
             continue
         try:
-            _cut_torn_tail(sp)
+            cut_torn_tail(sp)
             if sp.stat().st_size == 0:  # even the header was torn: start the file over
                 continue
             cols = read_samples_csv(sp)
@@ -193,10 +155,10 @@ def prepare_resume(cfg: SessionConfig, run_dir: Path) -> ResumeState:
         state.columns[g.name] = cols
         if cols["t"]:
             firsts.append(cols["t"][0])
-        ep = run_dir / g.name / "estimates.csv"
+        ep = estimates_path(run_dir, g.name)
         if ep.is_file() and ep.stat().st_size > 0:
-            _cut_torn_tail(ep)
-            last = _cut_estimates_after(ep, cols["t"][-1] if cols["t"] else None)
+            cut_torn_tail(ep)
+            last = cut_estimates_after(ep, cols["t"][-1] if cols["t"] else None)
             if last is not None:
                 state.estimates_until[g.name] = last
     if cfg.sampling.epoch is not None:

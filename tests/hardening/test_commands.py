@@ -34,6 +34,8 @@ pytest.importorskip("can_remote")
 T = 1_700_000_000.0
 RATE = 5
 REASON = {v: k for k, v in ACK_REASONS.items()}
+#: examples and command frames tried, counted for benchmarks/fuzz_counts.py (which
+#: prints them)
 COUNTS = {"examples": 0, "command_frames": 0}
 
 
@@ -214,6 +216,3 @@ def test_every_command_frame_is_answered_once_and_the_rate_holds(tmp_path_factor
     assert all(math.isfinite(x) for x in executed)
     COUNTS["examples"] += 1
 
-
-def test_zz_report_counts():
-    print("command property counts:", COUNTS)

@@ -32,6 +32,7 @@ DB = CFG.db
 MAPPED = [(s.message.frame_id, DB.get_message_by_name(s.message.name))
           for pair in CMAP.signals for s in pair]
 OTHERS = [(m.frame_id, m) for m in DB.messages]
+#: examples and frames tried, counted for benchmarks/fuzz_counts.py (which prints them)
 EXAMPLES = {"n": 0, "frames": 0}
 
 

@@ -1,0 +1,318 @@
+"""The fleet view: which runs are outliers, how much a parameter moves from turn-on to
+turn-on and from unit to unit, how it ages; one HTML page with the plots and the table.
+
+Outliers — the robust z-score of Iglewicz & Hoaglin, per parameter within a gyro type
+(the manifest's ``type`` column, else ``gyro_type``, else the whole fleet):
+
+    z_i = 0.6745 (x_i − median x) / MAD,    MAD = median |x_i − median x|
+
+flagged when |z_i| > 3.5 (at least ``MIN_GROUP`` runs in the group, MAD > 0). The median
+and MAD ignore the outliers themselves, so one bad run cannot hide another as a mean and
+std would.
+
+Spreads — with a ``serial`` column, per parameter and type, from the runs of units with
+at least two runs (one-way analysis of variance, serial = group):
+
+    turn-on to turn-on  s_w = sqrt( Σ_u Σ_i (x_ui − x̄_u)² / Σ_u (n_u − 1) )
+    unit to unit        s_b = std of the units' means x̄_u (ddof 1, over every unit)
+
+Trend (ageing) — with ``serial`` and ``date`` (ISO dates), per unit with two or more
+dates: the least-squares slope of the parameter over time, per year.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import io
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "write_view",
+           "Z_LIMIT", "MIN_GROUP"]
+
+#: |robust z| above this is an outlier (Iglewicz & Hoaglin's 3.5)
+Z_LIMIT = 3.5
+#: fewest runs of a type for outlier flags
+MIN_GROUP = 5
+_TYPE_KEYS = ("type", "gyro_type")
+
+
+def param_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """The parameter columns (each has its ``_std`` beside it), sorted."""
+    keys: set[str] = set()
+    for r in rows:
+        keys.update(r)
+    return sorted(k for k in keys if f"{k}_std" in keys and "." in k)
+
+
+def _type_of(row: dict[str, Any]) -> str:
+    for k in _TYPE_KEYS:
+        if row.get(k):
+            return str(row[k])
+    return "all"
+
+
+def _num(x: Any) -> float | None:
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        return None
+    return float(x) if math.isfinite(x) else None
+
+
+def _median(xs: Sequence[float]) -> float:
+    s = sorted(xs)
+    n = len(s)
+    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
+
+
+def robust_z(values: Sequence[float]) -> list[float] | None:
+    """Each value's robust z-score, or None when there are too few or MAD is 0."""
+    if len(values) < MIN_GROUP:
+        return None
+    med = _median(values)
+    mad = _median([abs(v - med) for v in values])
+    if not mad > 0:
+        return None
+    return [0.6745 * (v - med) / mad for v in values]
+
+
+def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One entry per (row, parameter) flagged: run, gyro, type, parameter, value, z."""
+    flags = []
+    ok = [r for r in rows if r.get("status") == "ok"]
+    for p in param_columns(ok):
+        groups: dict[str, list[tuple[dict[str, Any], float]]] = {}
+        for r in ok:
+            v = _num(r.get(p))
+            if v is not None:
+                groups.setdefault(_type_of(r), []).append((r, v))
+        for typ, members in groups.items():
+            zs = robust_z([v for _, v in members])
+            if zs is None:
+                continue
+            for (r, v), z in zip(members, zs, strict=True):
+                if abs(z) > Z_LIMIT:
+                    flags.append({"run": r["run"], "gyro": r.get("gyro"), "type": typ,
+                                  "parameter": p, "value": v, "z": z})
+    return flags
+
+
+def spreads(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per type and parameter: units, runs, turn-on-to-turn-on s_w, unit-to-unit s_b."""
+    out = []
+    ok = [r for r in rows if r.get("status") == "ok" and r.get("serial")]
+    for p in param_columns(ok):
+        groups: dict[str, dict[str, list[float]]] = {}
+        for r in ok:
+            v = _num(r.get(p))
+            if v is not None:
+                key = f"{r['serial']}/{r.get('gyro')}"
+                groups.setdefault(_type_of(r), {}).setdefault(key, []).append(v)
+        for typ, units in groups.items():
+            ss, dof = 0.0, 0
+            for xs in units.values():
+                if len(xs) > 1:
+                    m = sum(xs) / len(xs)
+                    ss += sum((x - m) ** 2 for x in xs)
+                    dof += len(xs) - 1
+            means = [sum(xs) / len(xs) for xs in units.values()]
+            s_b = None
+            if len(means) > 1:
+                mm = sum(means) / len(means)
+                s_b = math.sqrt(sum((m - mm) ** 2 for m in means) / (len(means) - 1))
+            out.append({"type": typ, "parameter": p, "units": len(units),
+                        "runs": sum(len(x) for x in units.values()),
+                        "turn_on_to_turn_on": math.sqrt(ss / dof) if dof else None,
+                        "unit_to_unit": s_b})
+    return out
+
+
+def _date(x: Any) -> _dt.date | None:
+    try:
+        return _dt.date.fromisoformat(str(x)[:10])
+    except ValueError:
+        return None
+
+
+def trends(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per unit (serial/gyro) and parameter with two or more dates: slope per year."""
+    out = []
+    ok = [r for r in rows if r.get("status") == "ok" and r.get("serial") and
+          _date(r.get("date")) is not None]
+    for p in param_columns(ok):
+        units: dict[str, list[tuple[float, float]]] = {}
+        for r in ok:
+            v = _num(r.get(p))
+            d = _date(r.get("date"))
+            if v is not None and d is not None:
+                units.setdefault(f"{r['serial']}/{r.get('gyro')}", []).append(
+                    (d.toordinal() / 365.25, v))
+        for unit, pts in sorted(units.items()):
+            ts = [t for t, _ in pts]
+            if len(set(ts)) < 2:
+                continue
+            tm = sum(ts) / len(ts)
+            vm = sum(v for _, v in pts) / len(pts)
+            sxx = sum((t - tm) ** 2 for t in ts)
+            slope = sum((t - tm) * (v - vm) for t, v in pts) / sxx
+            out.append({"unit": unit, "parameter": p, "runs": len(pts),
+                        "slope_per_year": slope, "mean": vm})
+    return out
+
+
+# --- the page ---------------------------------------------------------------------------
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _plots(rows: Sequence[dict[str, Any]], flags: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """(title, base64 PNG): per parameter, its values by run (outliers marked), and its
+    values over dates per unit where there are dates."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if r.get("status") == "ok"]
+    flagged = {(f["run"], f["gyro"], f["parameter"]) for f in flags}
+    out = []
+    for p in param_columns(ok):
+        pts = [(i, r) for i, r in enumerate(ok) if _num(r.get(p)) is not None]
+        if not pts:
+            continue
+        fig, ax = plt.subplots(figsize=(7, 2.6))
+        xs = [i for i, _ in pts]
+        ys = [float(r[p]) for _, r in pts]
+        es = [_num(r.get(f"{p}_std")) or 0.0 for _, r in pts]
+        ax.errorbar(xs, ys, yerr=es, fmt="o", ms=3, lw=0.8, color="tab:blue")
+        bad = [(i, float(r[p])) for i, r in pts if (r["run"], r.get("gyro"), p) in flagged]
+        if bad:
+            ax.plot([b[0] for b in bad], [b[1] for b in bad], "o", ms=8, mfc="none",
+                    color="tab:red", label=f"|robust z| > {Z_LIMIT:g}")
+            ax.legend(fontsize=7)
+        ax.set_title(f"{p} by run (±1 std)", fontsize=9)
+        ax.set_xlabel("run (table order)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        out.append((f"{p} by run", _png(fig)))
+        plt.close(fig)
+        dated: dict[str, list[tuple[_dt.date, float]]] = {}
+        for _, r in pts:
+            d = _date(r.get("date"))
+            if r.get("serial") and d is not None:
+                dated.setdefault(f"{r['serial']}/{r.get('gyro')}", []).append((d, float(r[p])))
+        if any(len({d for d, _ in v}) > 1 for v in dated.values()):
+            fig, ax = plt.subplots(figsize=(7, 2.6))
+            for unit, v in sorted(dated.items()):
+                v.sort()
+                ax.plot([d for d, _ in v], [y for _, y in v], "o-", ms=3, lw=0.8, label=unit)  # type: ignore[arg-type]
+            ax.set_title(f"{p} over dates, per unit (ageing)", fontsize=9)
+            ax.tick_params(labelsize=7)
+            if len(dated) <= 12:
+                ax.legend(fontsize=6, ncol=3)
+            fig.autofmt_xdate()
+            out.append((f"{p} over dates", _png(fig)))
+            plt.close(fig)
+    return out
+
+
+_JS = """
+document.querySelectorAll('table.sortable th').forEach(function (th, col) {
+  th.addEventListener('click', function () {
+    var body = th.closest('table').tBodies[0];
+    var asc = th.dataset.asc !== '1'; th.dataset.asc = asc ? '1' : '0';
+    var rows = Array.from(body.rows);
+    rows.sort(function (a, b) {
+      var x = a.cells[col].dataset.v ?? a.cells[col].textContent;
+      var y = b.cells[col].dataset.v ?? b.cells[col].textContent;
+      var nx = parseFloat(x), ny = parseFloat(y);
+      var c = (!isNaN(nx) && !isNaN(ny)) ? nx - ny : x.localeCompare(y);
+      return asc ? c : -c;
+    });
+    rows.forEach(function (r) { body.appendChild(r); });
+  });
+});
+"""
+
+_CSS = ("body{font-family:sans-serif;font-size:13px;margin:1em}"
+        "table{border-collapse:collapse;margin:0.5em 0}"
+        "td,th{border:1px solid #ccc;padding:2px 5px;white-space:nowrap}"
+        "th{background:#eee;cursor:pointer}tr.failed td{background:#fdd}"
+        "td.flag{background:#fc9}")
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return "<td></td>"
+    if isinstance(v, float):
+        return f'<td data-v="{v!r}">{v:.5g}</td>'
+    return f"<td>{html.escape(str(v))}</td>"
+
+
+def _simple_table(items: Sequence[dict[str, Any]]) -> str:
+    if not items:
+        return "<p>none</p>"
+    cols = list(items[0])
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    body = "".join("<tr>" + "".join(_cell(it.get(c)) for c in cols) + "</tr>" for it in items)
+    return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
+               attrs: Sequence[str] = ()) -> Path:
+    """``<out>/fleet.html`` (atomically) and ``<out>/fleet.json`` (flags, spreads,
+    trends); the table's runs link to their reports."""
+    from .table import _columns
+
+    out = Path(out)
+    flags = outliers(rows)
+    spr = spreads(rows)
+    trd = trends(rows)
+    flagged = {(f["run"], f["gyro"], f["parameter"]) for f in flags}
+    cols = [c for c in _columns(rows, attrs) if c not in ("source", "config", "run_dir")]
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    body = []
+    for r in rows:
+        cells = []
+        for c in cols:
+            v = r.get(c)
+            if c == "report" and v:
+                rel = os.path.relpath(str(v), out)
+                cells.append(f'<td><a href="{html.escape(rel)}">report</a></td>')
+            elif (r["run"], r.get("gyro"), c) in flagged:
+                cells.append(_cell(v).replace("<td", '<td class="flag"', 1))
+            else:
+                cells.append(_cell(v))
+        cls = ' class="failed"' if r.get("status") != "ok" else ""
+        body.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
+    n_bad = sum(1 for r in rows if r.get("status") != "ok")
+    plots = "".join(f'<figure><img alt="{html.escape(t)}" src="data:image/png;base64,{b}">'
+                    f"</figure>" for t, b in _plots(rows, flags))
+    page = (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>gyrostand fleet</title>"
+        f"<style>{_CSS}</style></head><body>"
+        f"<h1>Fleet: {len(rows)} run x gyro rows ({n_bad} not ok)</h1>"
+        f"<h2>Outliers (|robust z| &gt; {Z_LIMIT:g}, per parameter within a gyro type, "
+        f"groups of {MIN_GROUP}+)</h2>{_simple_table(flags)}"
+        f"<h2>Spread per parameter (turn-on to turn-on, unit to unit)</h2>"
+        f"{_simple_table(spr)}"
+        f"<h2>Trend per unit (slope per year)</h2>{_simple_table(trd)}"
+        f"<h2>Plots</h2>{plots or '<p>no parameters</p>'}"
+        f"<h2>Table (click a header to sort)</h2>"
+        f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}'
+        f"</tbody></table><script>{_JS}</script></body></html>\n")
+    from .table import _atomic_bytes
+
+    _atomic_bytes(out / "fleet.json", (json.dumps(
+        {"outliers": flags, "spreads": spr, "trends": trd}, indent=1, allow_nan=False)
+        + "\n").encode("utf-8"))
+    path = out / "fleet.html"
+    _atomic_bytes(path, page.encode("utf-8"))
+    return path

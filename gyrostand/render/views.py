@@ -1,0 +1,138 @@
+"""What a renderer is given: a result with the context its documents name.
+
+A :class:`~gyrostand.core.results.FitResult` renders on its own; a diagnosis, a fit step,
+Allan tables and a run's end need the data's name, the ledger, the run's paths: each view
+below holds one such object and that context, and ``to_dict()`` is its JSON contract (the
+keys ``diagnose --json``, ``fit --json``, ``allan --json`` have always printed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..core.allan import AllanTable
+    from ..core.candidates import Report
+    from ..session.final import GyroFinal
+    from ..session.pipeline import RunOutcome
+    from ..workbench import FitStep, Subject
+
+__all__ = ["DiagnosisView", "FitStepView", "AllanView", "RunSummary", "RunReport",
+           "ReportPage", "Plot"]
+
+
+@dataclass(frozen=True)
+class DiagnosisView:
+    """A diagnosis (``diagnose``): ``source`` names the data (e.g. ``run.csv (gyro az)``),
+    ``ledger`` the ledger the step was written to (text only)."""
+
+    report: Report
+    source: str
+    ledger: Path | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.report.to_dict()
+
+
+@dataclass(frozen=True)
+class FitStepView:
+    """A before/after of one model change (``fit``)."""
+
+    step: FitStep
+    ledger: Path | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.step.to_dict()
+
+
+@dataclass(frozen=True)
+class AllanView:
+    """The Allan tables of one gyro (``allan``): the raw drift's and the residual's after
+    ``model``, at confidence ``level``; ``unit`` the drift's, ``dt`` the sampling step (s)."""
+
+    gyro: str
+    source: str
+    unit: str
+    dt: float
+    model: tuple[str, ...]
+    level: float
+    raw: AllanTable
+    residual: AllanTable
+
+    @property
+    def tables(self) -> list[AllanTable]:
+        return [self.raw, self.residual]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"gyro": self.gyro, "source": self.source, "unit": self.unit, "dt": self.dt,
+                "model": list(self.model), "level": self.level, "raw": self.raw.to_dict(),
+                "residual": self.residual.to_dict()}
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The end of a run as the command that ran it prints it: why it stopped, each gyro's
+    final table (with the simulation's ``truths`` where known), the counts, the paths."""
+
+    outcome: RunOutcome
+    truths: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        from ..session.final import _clean
+
+        o = self.outcome
+        return {"stop_reason": o.stop_reason, "state": o.state, "run_dir": str(o.run_dir),
+                "result": str(o.result_json) if o.result_json.is_file() else None,
+                "report": str(o.report) if o.report.is_file() else None,
+                "gyros": {f.gyro: f.to_dict() for f in o.finals},
+                "stats": _clean(o.stats), "unwritten": list(o.stats.get("unwritten", []))}
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """A run folder's ``report.txt``: session ``session`` from ``source``, the final fits
+    of every gyro, the run's ``stats``, the simulation's ``truths`` where known."""
+
+    session: str
+    source: str
+    finals: Sequence[GyroFinal]
+    stats: Mapping[str, Any]
+    truths: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        from ..session.final import _clean
+
+        return {"session": self.session, "source": self.source,
+                "gyros": {f.gyro: f.to_dict() for f in self.finals},
+                "stats": _clean(dict(self.stats))}
+
+
+@dataclass(frozen=True)
+class Plot:
+    """One figure of the report page: its PNG's file name, alt text, caption, pixel size."""
+
+    file: str
+    alt: str
+    caption: str
+    size: tuple[int, int] = (0, 0)
+
+
+@dataclass(frozen=True)
+class ReportPage:
+    """The HTML report of a subject's current model (``report``): the diagnosis ``report``,
+    its ``plots`` (written beside the page), the ledger's ``steps``, where the convergence
+    figure's estimates come from, and when and by which version the page was written."""
+
+    subject: Subject
+    report: Report
+    plots: Sequence[Plot]
+    steps: Sequence[Mapping[str, Any]]
+    conv_source: str
+    written: str
+    version: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.report.to_dict()

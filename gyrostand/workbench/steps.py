@@ -1,0 +1,127 @@
+"""The workbench's steps: diagnose the subject's model, refit it with terms added or
+removed; each step is recorded in the ledger (:mod:`~gyrostand.workbench.ledger`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..core.candidates import Report, diagnose, fit_error
+from ..core.ml import ml
+from ..core.prederror import ModelError
+from ..core.results import DRIFT_UNIT, FitResult
+from ..errors import GyrostandError, OutputError
+from .ledger import append_ledger
+from .subject import Subject
+
+__all__ = ["fit_summary", "run_diagnose", "FitStep", "run_fit"]
+
+log = logging.getLogger(__name__)
+
+
+def fit_summary(r: FitResult, error: ModelError | None = None) -> dict[str, Any]:
+    """One fit in a before/after: innovation RMS, ln L, model, and the model error
+    (open-loop RMS of 60-s means over the run) with the floor the model predicts."""
+    d: dict[str, Any] = {"rms": r.residual_rms, "loglik": r.loglik,
+                         "model": list(r.model.names), "n_params": len(r.model.param_names)}
+    if error is not None:
+        d["model_error"] = _finite(error.rms)
+        d["model_error_floor"] = _finite(error.floor)
+        d["model_error_unit"] = error.unit
+    return d
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def run_diagnose(subject: Subject, *, record: bool = True) -> Report:
+    """Diagnose the subject's current model; append the step to the ledger."""
+    rep = diagnose(subject.samples, subject.model, unit=subject.unit)
+    if record:
+        err = rep.model_error
+        try:
+            append_ledger(subject.ledger_path, {
+                "gyro": subject.gyro, "action": "diagnose",
+                "model": list(subject.model.names),
+                "rms": rep.diagnosis.rms, "loglik": rep.fit.loglik, "adequate": rep.adequate,
+                **({"model_error": _finite(err.rms), "model_error_floor": _finite(err.floor)}
+                   if err is not None else {}),
+                "ljung_box_p": rep.diagnosis.ljung_box_p,
+                "best_candidate": rep.candidates[0].term if rep.candidates else None,
+                "parameters": {k: e.to_dict() for k, e in rep.fit.parameters.items()},
+            })
+        except OutputError as exc:  # a diagnosis is still worth showing (e.g. disk full)
+            log.warning("%s (the diagnosis is not in the ledger)", exc)
+    return rep
+
+
+@dataclass(frozen=True)
+class FitStep:
+    """Before/after of one model change."""
+
+    before: FitResult
+    after: FitResult
+    added: tuple[str, ...]
+    removed: tuple[str, ...]
+    lr_stat: float
+    df: int
+    p_value: float
+    before_error: ModelError | None = None
+    after_error: ModelError | None = None
+
+    @property
+    def bigger_is_after(self) -> bool:
+        """True when the test is of the added terms (the new model is the bigger one)."""
+        return self.df > 0 or (self.df == 0 and bool(self.added))
+
+    def to_dict(self) -> dict[str, Any]:
+        """``lr_stat`` = 2 (ln L_bigger − ln L_smaller), the test of the smaller model
+        (positive when the bigger model fits better, whichever way the step went)."""
+        return {
+            "model": list(self.after.model.names),
+            "added": list(self.added), "removed": list(self.removed),
+            "parameters": {k: e.to_dict() for k, e in self.after.parameters.items()},
+            "before": fit_summary(self.before, self.before_error),
+            "after": fit_summary(self.after, self.after_error),
+            "lr_stat": self.lr_stat, "df": self.df, "p_value": self.p_value,
+            "warnings": list(self.after.warnings),
+            "unit": self.after_error.unit if self.after_error is not None else DRIFT_UNIT,
+        }
+
+
+def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (),
+            *, record: bool = True) -> FitStep:
+    """Refit with terms added/removed; before and after side by side; ledger step."""
+    from scipy.stats import chi2
+
+    if not add and not remove:
+        raise GyrostandError("fit needs at least one --add TERM or --remove TERM")
+    new = subject.model
+    if remove:
+        new = new.remove(*remove)
+    if add:
+        new = new.add(*add)
+    before = ml(subject.samples, subject.model)
+    after = ml(subject.samples, new, start=before.values)
+    assert before.loglik is not None and after.loglik is not None
+    df = len(new.param_names) - len(subject.model.param_names)
+    # the test of the smaller model against the bigger one: LR = 2 (ln L_big − ln L_small)
+    lr = 2.0 * (after.loglik - before.loglik)
+    if df < 0 or (df == 0 and not add):
+        lr = -lr
+    p = float(chi2.sf(max(lr, 0.0), abs(df))) if df else float("nan")
+    step = FitStep(before=before, after=after, added=tuple(add), removed=tuple(remove),
+                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0,
+                   before_error=fit_error(before, subject.samples, subject.unit),
+                   after_error=fit_error(after, subject.samples, subject.unit))
+    if record:
+        append_ledger(subject.ledger_path, {
+            "gyro": subject.gyro, "action": "fit", **step.to_dict(),
+        })
+    return step

@@ -1,0 +1,117 @@
+"""The fleet view's statistics on a fleet of known spread, the inputs' errors, and the
+message when Dask is missing."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pytest
+
+from gyrostand.batch import fleet
+from gyrostand.batch.inputs import collect_runs
+from gyrostand.batch.table import write_table
+from gyrostand.cli import main
+from gyrostand.errors import ConfigError, DataError
+
+
+def _fleet(seed: int = 3, units: int = 30, runs: int = 6, s_w: float = 0.002,
+           s_b: float = 0.01, slope: float = 0.0) -> list[dict]:
+    """Rows of ``units`` units x ``runs`` turn-ons: unit means N(0.03, s_b), turn-ons
+    N(unit mean, s_w), one run a month, plus ``slope`` per year."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for u in range(units):
+        mean = 0.03 + s_b * rng.standard_normal()
+        for k in range(runs):
+            v = mean + s_w * rng.standard_normal() + slope * k / 12
+            rows.append({"run": f"u{u}-{k}", "serial": f"S{u}", "gyro": "az",
+                         "date": f"2026-{k + 1:02d}-01", "type": "FOG-A", "status": "ok",
+                         "markov.beta": float(v), "markov.beta_std": 0.001})
+    return rows
+
+
+def test_spreads_recover_turn_on_and_unit_to_unit_std():
+    (s,) = fleet.spreads(_fleet(s_w=0.002, s_b=0.01))
+    assert s["units"] == 30 and s["runs"] == 180
+    # s_w from 150 dof: ~6 % relative error; s_b from 30 unit means (~13 %, plus s_w²/n)
+    assert abs(s["turn_on_to_turn_on"] / 0.002 - 1) < 0.2
+    assert abs(s["unit_to_unit"] / math.sqrt(0.01 ** 2 + 0.002 ** 2 / 6) - 1) < 0.35
+
+
+def test_robust_z_flags_the_planted_outlier_and_nothing_else():
+    rows = _fleet(s_w=0.002, s_b=0.0005)
+    rows[17]["markov.beta"] += 0.05  # 25 turn-on stds off
+    rows.append({**rows[0], "run": "other-type", "type": "FOG-B", "markov.beta": 9.0})
+    flags = fleet.outliers(rows)
+    assert [(f["run"], f["parameter"]) for f in flags] == [(rows[17]["run"], "markov.beta")]
+    assert flags[0]["z"] > 10
+    # the lone FOG-B run is in a group of its own, too small to judge: not flagged
+
+
+def test_trend_per_unit_is_the_planted_ageing():
+    rows = _fleet(units=3, runs=12, s_w=1e-4, s_b=0.01, slope=0.006)
+    tr = fleet.trends(rows)
+    assert len(tr) == 3
+    for t in tr:
+        assert abs(t["slope_per_year"] / 0.006 - 1) < 0.1, t
+
+
+def test_page_and_table_from_rows(tmp_path):
+    rows = _fleet(units=4, runs=3)
+    rows[0] = {"run": rows[0]["run"], "serial": "S0", "status": "failed",
+               "error": "x.blf: no CAN frame read from the log"}
+    paths = write_table(rows, tmp_path, ["serial", "date", "type"])
+    assert (tmp_path / "fleet.csv").read_text().splitlines()[0].startswith(
+        "run,serial,date,type,gyro,status,error,")
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(paths["parquet"]).to_pylist()
+    assert len(t) == 12 and t[0]["error"].endswith("no CAN frame read from the log")
+    assert t[1]["markov.beta"] == rows[1]["markov.beta"]
+    page = fleet.write_view(rows, tmp_path, ["serial", "date", "type"]).read_text()
+    assert page.count("<tr") >= 12 and "over dates" in page and 'class="failed"' in page
+
+
+def test_inputs_name_the_problem(tmp_path):
+    log = tmp_path / "a.blf"
+    log.write_bytes(b"x")
+    with pytest.raises(ConfigError, match="a.blf: a raw log needs the session file"):
+        collect_runs([str(log)])
+    with pytest.raises(DataError, match="matches no file"):
+        collect_runs([str(tmp_path / "*.asc")])
+    m = tmp_path / "m.csv"
+    m.write_text("serial,date\nS1,2026-01-01\n")
+    with pytest.raises(DataError, match="m.csv: line 1: the manifest needs a 'path' column"):
+        collect_runs([], manifest=m)
+    m.write_text("path,config,serial\na.blf,missing.yaml,S1\n")
+    with pytest.raises(ConfigError, match=r"m.csv: line 2: .*missing.yaml: no such session"):
+        collect_runs([], manifest=m)
+    (tmp_path / "s.yaml").write_text("x: 1\n")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "a.blf").write_bytes(b"x")
+    runs = collect_runs([str(tmp_path / "**" / "*.blf")], config=tmp_path / "s.yaml")
+    assert len(runs) == 2 and len({r.run for r in runs}) == 2  # same stem: names differ
+    assert collect_runs([str(tmp_path / "**" / "*.blf")],
+                        config=tmp_path / "s.yaml") == runs  # and stay the same
+
+
+def test_without_dask_the_error_names_the_extra(monkeypatch, capsys):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "distributed" else real(name, *a))
+    assert main(["batch", "x.blf", "--out", "o"]) == 2
+    assert "pip install 'gyrostand[fleet]'" in capsys.readouterr().err
+
+
+def test_bad_steps_and_models_are_usage_errors_before_any_work(capsys, tmp_path):
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "fit"]) == 2
+    assert "--do 'fit': steps are replay, identify, diagnose (got fit)" in \
+        capsys.readouterr().err
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "replay"]) == 2
+    assert "give identify and/or diagnose" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--model",
+                 "markov,nosuchterm"]) == 2
+    assert "nosuchterm" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
