@@ -80,9 +80,13 @@ def test_quiet_on_a_terminal_gives_stage_lines(replay_args):
 
 def test_nothing_from_library_use(replay_args, capsys):
     """Imported as a library (tests, scripts), gyrostand prints no progress."""
+    from gyrostand import progress
     from gyrostand.config import load_config
     from gyrostand.session.offline import run_replay
 
+    # as in a process that never ran the CLI (an in-process CLI call earlier in the suite,
+    # e.g. tests/session/test_export.py, turns progress on for the whole process)
+    progress.configure(on=False)
     cfg = load_config(replay_args[1])
     run_replay(cfg, Path(replay_args[2]), out=Path(replay_args[4]))
     err = capsys.readouterr().err
