@@ -1,0 +1,358 @@
+"""Loading and validating a session file: YAML with duplicate-key checks, then the parser."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from gyrostand.can.codes import check_width, role_codes
+from gyrostand.can.dbc import MessageRef, find_message, load_dbc
+from gyrostand.errors import CanEdgeError, ConfigError
+
+from .gyros import GyroSections
+from .schema import (
+    _NAME_RE,
+    ACK_SIGNALS,
+    COMMAND_SIGNALS,
+    MATCHES,
+    MAX_DT,
+    MAX_EPOCH,
+    MAX_GAP_BINS,
+    MIN_DT,
+    MODEL_TERMS,
+    STATUS_SIGNALS,
+    GyroConfig,
+    ReconnectConfig,
+    ResponsesConfig,
+    SamplingConfig,
+    SessionConfig,
+    _clip,
+    _join,
+    _kind,
+)
+from .simulate import SimulateSection
+
+
+def load_config(path: str | Path) -> SessionConfig:
+    """Read and validate a YAML session file. Raises :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
+    text = decode_text(raw, path)
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {_clip(str(exc), 600)}") from exc
+    return parse_config(data, source=path, base_dir=path.resolve().parent)
+
+
+def decode_text(raw: bytes, path: str | Path) -> str:
+    """A session file's bytes as text: UTF-8 (a leading BOM is dropped). UTF-16/32 and
+    other encodings are refused with the byte offset. Raises :class:`ConfigError`."""
+    for bom, name in ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+                      (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16")):
+        if raw.startswith(bom):
+            raise ConfigError(f"{path}: the file is {name} text; save it as UTF-8")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}: "
+                          f"{raw[exc.start:exc.start + 4]!r}); save it as UTF-8") from None
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses aliases (``*name``: a few lines of them expand to
+    gigabytes, the "billion laughs") and duplicate keys (YAML's last-one-wins would
+    silently drop the first)."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            ev = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f"aliases (*{_clip(str(ev.anchor), 40)}) are not accepted in a "
+                "session file: write the value out", ev.start_mark)
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+                seen.add(key)
+            except TypeError:  # an unhashable key: SafeLoader says so below
+                continue
+            if dup:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark,
+                    f"duplicate key {_clip(repr(key), 60)}", key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
+
+def parse_config(data: Any, source: str | Path = "<config>",
+                 base_dir: str | Path | None = None) -> SessionConfig:
+    """Validate an already parsed mapping (``base_dir`` resolves relative paths)."""
+    return _Parser(str(source), Path(base_dir) if base_dir else Path.cwd()).session(data)
+
+
+class _Parser(GyroSections, SimulateSection):
+    """The validating parser: helpers and the top-level sections (gyro and simulate
+    sections in their mixins)."""
+
+    def __init__(self, source: str, base_dir: Path) -> None:
+        self.source = source
+        self.base = base_dir
+        self.db: Any = None
+        self.dbc_name = "DBC"
+        self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
+        self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
+        self.match = "id"  # the session's default channel `match` once parsed
+
+    # -- helpers ---------------------------------------------------------------------
+    def fail(self, path: str, msg: str) -> ConfigError:
+        return ConfigError(f"{self.source}: {_clip(path, 200)}: {_clip(msg, 600)}")
+
+    def mapping(self, value: Any, path: str, required: tuple[str, ...],
+                optional: tuple[str, ...]) -> dict[str, Any]:
+        if not isinstance(value, Mapping):
+            raise self.fail(path, f"expected a mapping, got {_kind(value)}")
+        unknown = [k for k in value if k not in required and k not in optional]
+        if unknown:
+            allowed = ", ".join(required + optional)
+            raise self.fail(_join(path, str(unknown[0])),
+                            f"unknown key (allowed here: {allowed})")
+        for k in required:
+            if k not in value:
+                raise self.fail(_join(path, k), "missing required key")
+        return dict(value)
+
+    def number(self, value: Any, path: str, *, lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(path, f"expected a number, got {_kind(value)}")
+        try:
+            x = float(value)
+        except OverflowError:
+            raise self.fail(path, f"too large ({len(str(abs(value)))}-digit integer)") from None
+        if not math.isfinite(x):
+            raise self.fail(path, f"must be finite, got {value!r}")
+        if lo is not None and (x < lo or (lo_open and x == lo)):
+            raise self.fail(path, f"must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+        if hi is not None and x > hi:
+            raise self.fail(path, f"must be <= {hi:g}, got {value!r}")
+        return x
+
+    def integer(self, value: Any, path: str, lo: int | None = None,
+                hi: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(path, f"expected an integer, got {_kind(value)}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(path, f"must be in [{lo}, {hi}], got {value}")
+        return value
+
+    def string(self, value: Any, path: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.fail(path, f"expected a non-empty string, got {_kind(value)}")
+        return value
+
+    def names(self, value: Any, path: str, vocabulary: tuple[str, ...]) -> tuple[str, ...]:
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",")]
+        if not isinstance(value, list) or not value:
+            raise self.fail(path, f"expected a non-empty list, got {_kind(value)}")
+        out: list[str] = []
+        for i, v in enumerate(value):
+            if v not in vocabulary:
+                raise self.fail(f"{path}[{i}]", f"{v!r} is not one of: {', '.join(vocabulary)}")
+            if v in out:
+                raise self.fail(f"{path}[{i}]", f"{v!r} is listed twice")
+            out.append(v)
+        return tuple(out)
+
+    def message(self, value: Any, path: str) -> MessageRef:
+        ref, extended = value, None
+        if isinstance(value, Mapping):
+            m = self.mapping(value, path, ("message",), ("extended",))
+            ref, extended = m["message"], self.boolean(m.get("extended"), f"{path}.extended")
+            path = f"{path}.message"
+        try:
+            return find_message(self.db, ref, extended, source=self.dbc_name)[0]
+        except CanEdgeError as exc:
+            raise self.fail(path, str(exc)) from None
+
+    def boolean(self, value: Any, path: str) -> bool | None:
+        if value is None or isinstance(value, bool):
+            return value
+        raise self.fail(path, f"expected true or false, got {_kind(value)}")
+
+    def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...],
+                        role: str | None = None) -> None:
+        """``ref`` must carry the signals ``needed``; for a message of the daemon's in
+        ``role`` (``result``, ``summary``, ``status``, ``ack``, ``command``) also the value
+        tables of its codes (:func:`gyrostand.can.codes.role_codes`)."""
+        msg = self.db.get_message_by_name(ref.name)
+        have = {s.name for s in msg.signals}
+        missing = [s for s in needed if s not in have]
+        if missing:
+            raise self.fail(path, f"message {ref.name} lacks signal(s) {', '.join(missing)} "
+                                  f"needed here (see dbc/README.md)")
+        if role is not None:
+            try:
+                role_codes(msg, role, self.dbc_name)
+            except CanEdgeError as exc:
+                raise self.fail(path, str(exc)) from None
+
+    def require_width(self, ref: MessageRef, path: str, model: tuple[str, ...]) -> None:
+        """The summary's ``ModelTerms`` must have a bit for every term of ``model``."""
+        from gyrostand.can.bus import model_terms_mask
+
+        try:
+            check_width(self.db.get_message_by_name(ref.name), "ModelTerms",
+                        model_terms_mask(model), f"the model {', '.join(model)}",
+                        self.dbc_name)
+        except CanEdgeError as exc:
+            raise self.fail(path, str(exc)) from None
+
+    # -- sections --------------------------------------------------------------------
+    def session(self, data: Any) -> SessionConfig:
+        top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
+                           ("sampling", "responses", "simulate", "reconnect", "match",
+                            "plugins"))
+        self.match = top.get("match", "id")  # the default of every channel's `match`
+        if self.match not in MATCHES:
+            raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
+        sess = self.mapping(top["session"], "session", ("name",), ("output", "fsync"))
+        name = self.string(sess["name"], "session.name")
+        if not _NAME_RE.match(name):
+            raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
+        output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
+        fsync = bool(self.boolean(sess.get("fsync", True), "session.fsync"))
+        bus = top["bus"]
+        if not isinstance(bus, Mapping) or not bus:
+            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
+        if "interface" not in bus:
+            raise self.fail("bus.interface", "missing required key")
+        self.string(bus["interface"], "bus.interface")
+        self.dbc_name = self.string(top["dbc"], "dbc")
+        dbc_path = (self.base / self.dbc_name).resolve()
+        try:
+            self.db = load_dbc(dbc_path)
+        except CanEdgeError as exc:
+            raise self.fail("dbc", str(exc)) from None
+        sampling = self.sampling(top.get("sampling", {}))
+        self.terms = self.plugins(top.get("plugins"))
+        gyros_raw = top["gyros"]
+        if not isinstance(gyros_raw, list) or not gyros_raw:
+            raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
+        gyros = tuple(self.gyro(g, f"gyros[{i}]") for i, g in enumerate(gyros_raw))
+        seen: dict[str, int] = {}
+        for i, g in enumerate(gyros):
+            if g.name in seen:
+                raise self.fail(f"gyros[{i}].name", f"{g.name!r} repeats gyros[{seen[g.name]}]")
+            seen[g.name] = i
+        self.check_channel_clashes(gyros)
+        responses = self.responses(top.get("responses", {}))
+        self.check_own_messages(gyros, responses)
+        simulate = None
+        if top.get("simulate") is not None:
+            simulate = self.simulate(top["simulate"], [g.name for g in gyros])
+        reconnect = self.reconnect(top.get("reconnect") or {})
+        return SessionConfig(
+            path=Path(self.source), name=name, output=output, fsync=fsync,
+            bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
+            gyros=gyros, responses=responses, simulate=simulate, db=self.db,
+            reconnect=reconnect,
+        )
+
+    def plugins(self, value: Any) -> tuple[str, ...]:
+        """Load the term plugins (installed entry points, then ``plugins: [module, ...]``):
+        the model terms the rest of the file may use."""
+        from gyrostand.errors import ModelError
+        from gyrostand.plugins import known_terms, load_entry_points, load_modules
+
+        try:
+            load_entry_points()
+        except ModelError as exc:
+            raise self.fail("plugins", str(exc)) from None
+        mods = [] if value is None else value
+        if not isinstance(mods, list) or not all(isinstance(m, str) and m for m in mods):
+            raise self.fail("plugins", f"expected a list of module names, got {_kind(value)}")
+        for i, m in enumerate(mods):
+            try:
+                load_modules([m])
+            except ModelError as exc:
+                raise self.fail(f"plugins[{i}]", str(exc)) from None
+        return known_terms()
+
+    def reconnect(self, value: Any) -> ReconnectConfig:
+        m = self.mapping(value, "reconnect", (), ("max_time", "first_delay", "max_delay",
+                                                  "at_start"))
+        max_time = self.number(m.get("max_time", 600.0), "reconnect.max_time", lo=0.0)
+        first = self.number(m.get("first_delay", 0.25), "reconnect.first_delay", lo=0.0,
+                            lo_open=True)
+        most = self.number(m.get("max_delay", 10.0), "reconnect.max_delay", lo=first)
+        at_start = self.number(m.get("at_start", 0.0), "reconnect.at_start", lo=0.0)
+        return ReconnectConfig(max_time, first, most, at_start)
+
+    def sampling(self, value: Any) -> SamplingConfig:
+        m = self.mapping(value, "sampling", (), ("dt", "epoch", "buffer", "max_gap"))
+        dt = self.number(m.get("dt", 1.0), "sampling.dt", lo=MIN_DT, hi=MAX_DT)
+        epoch = m.get("epoch")
+        if epoch is not None:
+            # far from 0 a double cannot tell frame times a bin apart (1e20 s: 16 384 s)
+            epoch = self.number(epoch, "sampling.epoch", lo=-MAX_EPOCH, hi=MAX_EPOCH)
+        buffer = self.integer(m.get("buffer", 65536), "sampling.buffer", 16, 100_000_000)
+        max_gap = self.number(m.get("max_gap", 3600.0), "sampling.max_gap", lo=dt,
+                              hi=MAX_GAP_BINS * dt)
+        self.dt = dt
+        return SamplingConfig(dt, epoch, buffer, max_gap)
+
+    def check_own_messages(self, gyros: tuple[GyroConfig, ...],
+                           responses: ResponsesConfig) -> None:
+        """A measured channel on a message the daemon itself sends or obeys (status, ack,
+        command, a result or summary) would feed it its own frames, or data as commands."""
+        own: dict[int, str] = {}
+        for key in ("status", "ack", "command"):
+            ref = getattr(responses, key)
+            if ref is not None:
+                own[ref.key] = f"responses.{key}"
+        for i, g in enumerate(gyros):
+            if g.result is not None:
+                own[g.result.values.key] = f"gyros[{i}].result.message"
+                if g.result.summary is not None:
+                    own[g.result.summary.key] = f"gyros[{i}].result.summary"
+        for i, g in enumerate(gyros):
+            for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
+                where = own.get(c.signal.message.key)
+                if where is not None:
+                    raise self.fail(f"gyros[{i}].{ch}.message", f"{c.signal.message.name} is "
+                                    f"the daemon's own message ({where})")
+
+    def responses(self, value: Any) -> ResponsesConfig:
+        m = self.mapping(value, "responses", (),
+                         ("period", "heartbeat", "status", "ack", "command", "node",
+                          "command_rate"))
+        period = self.number(m.get("period", 10.0), "responses.period", lo=0.0, lo_open=True)
+        beat = self.number(m.get("heartbeat", 1.0), "responses.heartbeat", lo=0.0,
+                           lo_open=True)
+        refs: dict[str, MessageRef | None] = {}
+        for key, needed in (("status", STATUS_SIGNALS), ("ack", ACK_SIGNALS),
+                            ("command", COMMAND_SIGNALS)):
+            refs[key] = None
+            if m.get(key) is not None:
+                refs[key] = self.message(m[key], f"responses.{key}")
+                self.require_signals(refs[key], f"responses.{key}", needed,  # type: ignore[arg-type]
+                                     key)
+        node = self.integer(m.get("node", 1), "responses.node", 0, 254)
+        rate = self.number(m.get("command_rate", 10.0), "responses.command_rate", lo=0.0,
+                           lo_open=True)
+        return ResponsesConfig(period, beat, refs["status"], refs["ack"], refs["command"], node,
+                               rate)
+

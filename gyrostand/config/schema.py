@@ -1,0 +1,203 @@
+"""The session file's frozen objects and the constants the parser checks against."""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gyrostand.can.dbc import MessageRef, SignalRef
+from gyrostand.core import registry
+from gyrostand.core.names import VOCABULARY
+from gyrostand.core.registry import LkfOptions
+
+log = logging.getLogger(__name__)
+
+#: The model-term vocabulary of PRODUCT.md (the contract shared by config, CLI, JSON).
+MODEL_TERMS = VOCABULARY
+#: every identifier a gyro's ``identifiers:`` may name (the registry's)
+IDENTIFIERS = registry.names()
+
+#: Signals the daemon writes or reads in its own response/command messages.
+RESULT_SIGNALS = ("Kind", "Identifier", "Param", "Value", "Std", "NParams", "Counter")
+SUMMARY_SIGNALS = ("Identifier", "Status", "ModelTerms", "Samples", "ResidualRms")
+STATUS_SIGNALS = ("Page", "Counter", "State", "Bins", "Gaps", "FramesDecoded",
+                  "FramesRejected", "BusErrors", "LateFrames")
+COMMAND_SIGNALS = ("Command", "Sequence")
+ACK_SIGNALS = ("Command", "Sequence", "Result", "Reason")
+
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
+MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 1000.0
+#: bounds of sampling.dt (s): frames at up to 1000 Hz in bins of at least 10 ms, at most 1 h
+MIN_DT, MAX_DT = 0.01, 3600.0
+#: sampling.max_gap / dt at most: the gap bins one forward jump may emit
+MAX_GAP_BINS = 1_000_000
+#: |sampling.epoch| and simulate.start at most (s; ~ year 5138): beyond, doubles of frame
+#: time are coarser than 1e-5 s
+MAX_EPOCH = 1e11
+#: how frames are matched to a mapped message: full id, or J1939 PGN (see ChannelConfig)
+MATCHES = ("id", "pgn")
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """One measured channel: the DBC signal carrying it and, optionally, its rolling counter."""
+
+    signal: SignalRef
+    counter: SignalRef | None = None
+    #: "id": frames match on the full id; "pgn": J1939, on the PGN whatever the priority
+    #: and source address (extended ids only)
+    match: str = "id"
+
+
+@dataclass(frozen=True)
+class ResultConfig:
+    """Messages the daemon sends a gyro's results in (see ``dbc/README.md``)."""
+
+    values: MessageRef
+    summary: MessageRef | None = None
+
+
+#: The online LKF of a gyro (its ``lkf:`` section): the lkf identifier's typed options
+#: (:class:`~gyrostand.core.registry.LkfOptions`; a value left out is estimated from a
+#: warm-up of ``warmup`` bins).
+LkfConfig = LkfOptions
+
+
+@dataclass(frozen=True)
+class GyroConfig:
+    name: str
+    drift: ChannelConfig
+    temperature: ChannelConfig
+    model: tuple[str, ...]
+    identifiers: tuple[str, ...]
+    result: ResultConfig | None = None
+    lkf: LkfConfig = field(default_factory=LkfConfig)
+
+    def options(self, identifier: str) -> Any:
+        """The typed options of ``identifier`` for this gyro: its section of the session
+        file where it has one (``lkf:``), else the identifier's defaults."""
+        ident = registry.get(identifier)
+        section = getattr(self, ident.name, None)
+        return section if isinstance(section, ident.Options) else ident.Options()
+
+
+@dataclass(frozen=True)
+class SamplingConfig:
+    """Binning: ``dt`` bin width (s); ``epoch`` bin grid origin (s, None: the first frame's
+    timestamp floored to a multiple of dt); ``buffer`` capacity of the decoded-sample buffer
+    (samples); ``max_gap`` largest forward jump of frame time accepted (s)."""
+
+    dt: float = 1.0
+    epoch: float | None = None
+    buffer: int = 65536
+    max_gap: float = 3600.0
+
+
+@dataclass(frozen=True)
+class ResponsesConfig:
+    """Frames the daemon sends and the command channel it listens to. ``period`` (s) between
+    result rounds and ``heartbeat`` (s) between status frames, in frame time; ``node`` is
+    this daemon's id in the command's ``Target`` (255 addresses every daemon)."""
+
+    period: float = 10.0
+    heartbeat: float = 1.0
+    status: MessageRef | None = None
+    ack: MessageRef | None = None
+    command: MessageRef | None = None
+    node: int = 1
+    command_rate: float = 10.0
+
+
+@dataclass(frozen=True)
+class ReconnectConfig:
+    """What the daemon does when the bus goes away (e.g. a ``remote`` server stops):
+    retry opening it, waiting ``first_delay`` s, then twice as long each time up to
+    ``max_delay`` s; after ``max_time`` s without a bus it stops in state ``fault``
+    (0: at once). ``at_start``: s to keep trying, with the same backoff, when the bus
+    cannot be opened at startup (an adapter not plugged in yet, a server not up yet;
+    default 0: fail at once); a bus that can never open (unknown interface, a driver
+    that is not installed, bad arguments) fails at once anyway."""
+
+    max_time: float = 600.0
+    first_delay: float = 0.25
+    max_delay: float = 10.0
+    at_start: float = 0.0
+
+
+@dataclass(frozen=True)
+class SimGyroConfig:
+    """True model of a simulated gyro: terms and ``<term>.<param>`` values."""
+
+    model: tuple[str, ...]
+    params: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class SimulateConfig:
+    """Stand simulator: temperature breakpoints ``(t s, T degC)``, linear between; frame
+    rates (Hz); uniform timestamp jitter half-width (s); drop probability; sensor
+    quantization step (physical units, 0 = only the DBC's resolution); ``start`` absolute
+    timestamp of t = 0 (s since the Unix epoch: BLF stores absolute time)."""
+
+    temperature: tuple[tuple[float, float], ...]
+    gyros: Mapping[str, SimGyroConfig]
+    seed: int = 0
+    start: float = 1_700_000_000.0
+    duration: float | None = None
+    drift_rate: float = 100.0
+    temperature_rate: float = 10.0
+    interpolation: str = "hold"
+    jitter: float = 0.0
+    drop: float = 0.0
+    drift_quantization: float = 0.0
+    temperature_quantization: float = 0.0
+    realtime: bool = False
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """A validated session. ``db`` is the loaded cantools database (not compared)."""
+
+    path: Path
+    name: str
+    output: Path
+    bus: Mapping[str, Any]
+    dbc_path: Path
+    sampling: SamplingConfig
+    gyros: tuple[GyroConfig, ...]
+    responses: ResponsesConfig
+    simulate: SimulateConfig | None = None
+    db: Any = field(default=None, repr=False, compare=False)
+    reconnect: ReconnectConfig = field(default_factory=ReconnectConfig)
+    #: live runs: each once-a-second acknowledgement is fdatasync'ed (raw log first,
+    #: then samples and estimates), so it survives a power cut, not only a crash
+    fsync: bool = True
+
+    def gyro(self, name: str) -> GyroConfig:
+        for g in self.gyros:
+            if g.name == name:
+                return g
+        raise KeyError(name)
+
+
+
+def _join(path: str, key: str) -> str:
+    return key if path == "<top>" else f"{path}.{key}"
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "nothing"
+    return f"{type(value).__name__} {_clip(repr(value), 80)}" if not isinstance(
+        value, (dict, list)) else type(value).__name__
+
+
+def _clip(text: str, n: int) -> str:
+    """``text`` cut to ``n`` characters (an error message quotes input, never all of it)."""
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
+
