@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core.names import VOCABULARY
+from ..runfolder.layout import RESULT
 from .common import add_format_args, emit
 
 if TYPE_CHECKING:
@@ -45,7 +46,7 @@ def _drift_unit(subject: Subject) -> str:
     try:
         from ..config import load_config
 
-        info = json.loads((subject.run_dir / "result.json").read_text())
+        info = json.loads((subject.run_dir / RESULT).read_text())
         cfg = load_config(Path(info["config"]))
         return cfg.gyro(subject.gyro).drift.signal.unit or "y"
     except Exception as exc:  # the session file moved, changed, ...: a generic unit

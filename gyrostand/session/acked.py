@@ -21,6 +21,7 @@ from pathlib import Path
 
 from ..can.binning import Bin, SamplesWriter
 from ..errors import OutputError
+from ..runfolder.layout import ESTIMATES, SNAPSHOT
 from .online import GyroTracker
 from .outputs import EstimatesWriter, write_atomic
 from .resume import ResumeState
@@ -29,7 +30,7 @@ __all__ = ["AckedFiles", "SNAPSHOT_FILE"]
 
 log = logging.getLogger(__name__)
 
-SNAPSHOT_FILE = "snapshot.json"
+SNAPSHOT_FILE = SNAPSHOT
 
 
 class AckedFiles:
@@ -68,7 +69,7 @@ class AckedFiles:
                                       before_flush=self.before_flush, append=self.append,
                                       sync=self.sync)
         self.estimates = {
-            name: EstimatesWriter(self.run_dir / name / "estimates.csv", tr.identifiers,
+            name: EstimatesWriter(self.run_dir / name / ESTIMATES, tr.identifiers,
                                   tr.model.param_names, append=self.append, sync=self.sync)
             for name, tr in self.trackers.items()}
 

@@ -53,6 +53,7 @@ from pathlib import Path
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
+from ..runfolder.layout import RAW_LOG
 from .buslink import Backoff, BusLink, NotifierWatch, StopSignals, open_bus_at_start
 from .notify import ServiceNotify
 from .outputs import (
@@ -113,7 +114,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
         link.bus = open_bus_at_start(cfg, stop_event, handle_signals, on_waiting)
         if state is None:
             run_dir = make_run_dir(out or cfg.output, cfg.name)
-            raw_path = run_dir / "raw.blf"
+            raw_path = run_dir / RAW_LOG
             stack.callback(RunLock(run_dir).release)
         check_writable(run_dir)
         stack.callback(RunLog(run_dir).close)

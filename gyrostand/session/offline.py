@@ -29,6 +29,7 @@ from ..core.model import Model
 from ..core.profiles import TemperatureProfile
 from ..core.simulate import simulate
 from ..errors import ConfigError, GyrostandError
+from ..runfolder.layout import RESULT
 from .outputs import RunLog, make_run_dir, write_atomic
 from .pipeline import NullSink, Pipeline, RunOutcome
 
@@ -74,7 +75,7 @@ def run_replay(cfg: SessionConfig,
                 return pipe.finish("end of log", truths=truths,
                                    extra_stats={"log": damage.as_dict()})
     except BaseException as exc:
-        _mark_failed(run_dir / "result.json", cfg, f"replay of {what}", run_dir, exc)
+        _mark_failed(run_dir / RESULT, cfg, f"replay of {what}", run_dir, exc)
         raise
     finally:
         runlog.close()

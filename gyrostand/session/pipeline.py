@@ -43,6 +43,7 @@ from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
 from ..errors import GyrostandError, OutputError
+from ..runfolder.layout import RESULT
 from .acked import AckedFiles
 from .commands import CommandProtocol, TokenBucket
 from .final import write_provisional_result
@@ -117,7 +118,7 @@ class Pipeline:
         """Create the run files, write the provisional ``result.json``, resume the kept
         bins (when ``resume``); the wall clock's reference is taken last. Returns self."""
         self.files.open()
-        write_provisional_result(self.run_dir / "result.json", self.cfg, self.source,
+        write_provisional_result(self.run_dir / RESULT, self.cfg, self.source,
                                  self.run_dir)
         st = self.resume_state
         if st is not None:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..can.binning import read_samples_csv
 from ..errors import OutputError
+from ..runfolder.layout import REPORT, RESULT
 from .commands import FAULT, STOPPED
 from .final import GyroFinal, fit_gyro, write_report, write_result_json
 from .online import OnlineEstimate
@@ -85,8 +86,8 @@ def finish_run(pipe: Pipeline, reason: str, *, extra_stats: dict[str, Any] | Non
             k: stats[k] for k in ("recorder", "bus") if k in stats}))
         stats["segments"] = segs.segments()
         stats["run_totals"] = segs.totals()
-    result = pipe.run_dir / "result.json"
-    report = pipe.run_dir / "report.txt"
+    result = pipe.run_dir / RESULT
+    report = pipe.run_dir / REPORT
     stats["unwritten"] = unwritten
     attempt(lambda: write_result_json(result, pipe.cfg, pipe.source, pipe.run_dir,
                                       finals, stats))
