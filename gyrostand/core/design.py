@@ -215,11 +215,19 @@ def predicted_std(model: Model, params: Mapping[str, float], case: np.ndarray,
                   limits: ChamberLimits, *, free: Sequence[str] | None = None,
                   n_mc: int = 40, seed: int = 12345) -> dict[str, float]:
     """√CRLB of each free parameter for a record on the case temperature ``case``."""
+    return _information(model, params, case, limits, free, n_mc, seed)[0]
+
+
+def _information(model: Model, params: Mapping[str, float], case: np.ndarray,
+                 limits: ChamberLimits, free: Sequence[str] | None, n_mc: int, seed: int
+                 ) -> tuple[dict[str, float], np.ndarray, tuple[str, ...]]:
+    """(√CRLB per free parameter, the information I, its parameter names)."""
     info, names = fisher_information(model, params, limits.grid, case, dt=limits.dt,
                                      free=free, n_mc=n_mc, seed=seed)
     C = _inverse(info)
-    return {n: float(math.sqrt(C[i, i])) if C[i, i] > 0 else math.inf
-            for i, n in enumerate(names)}
+    std = {n: float(math.sqrt(C[i, i])) if C[i, i] > 0 else math.inf
+           for i, n in enumerate(names)}
+    return std, info, names
 
 
 def _inverse(info: np.ndarray) -> np.ndarray:
@@ -354,11 +362,8 @@ def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
 
     def report(p: Program) -> tuple[dict[str, float], float]:
         case = case_temperature(p.setpoint(limits.duration), limits)
-        info, names = fisher_information(model, params, limits.grid, case, dt=limits.dt,
-                                         free=free, n_mc=n_mc_report, seed=seed + 1)
-        C = _inverse(info)
-        std = {n: float(math.sqrt(C[i, i])) if C[i, i] > 0 else math.inf
-               for i, n in enumerate(names)}
+        std, info, names = _information(model, params, case, limits, free, n_mc_report,
+                                        seed + 1)
         return std, float(f_goal(info, names))
 
     std, val = report(prog)
