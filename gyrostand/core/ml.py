@@ -114,6 +114,10 @@ class _Problem:
         self.n_obs = samples.n_observed
         self.nevals = 0
 
+    def kind(self, name: str) -> str:
+        """The kind of a searched parameter (``rate``, ``time``, ``std``)."""
+        return self.model.kind(name)
+
     def unpack(self, z: np.ndarray) -> dict[str, float]:
         p = dict(self.fixed)
         for n, v in zip(self.znames, z, strict=True):
@@ -248,70 +252,46 @@ def _newton_gain(res, n: int) -> float:
     return float(0.5 * abs(g @ step) * n)
 
 
-def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
-    """Exact maximum-likelihood fit of every free parameter of ``model``.
+def _starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
+                 ) -> list[np.ndarray]:
+    """Start points from a previous fit's natural values ``start`` (by searched name), and
+    a scan of each searched rate or time the previous fit lacks."""
+    # a previous fit's values; parameters it lacks start mid-grid
+    z0 = []
+    mid = np.mean(grid, axis=0) if grid else np.zeros(len(prob.znames))
+    for i, n in enumerate(prob.znames):
+        ref = start.get(prob.ref, 1.0) if prob.ref and n in prob.stds else 1.0
+        if n not in start or not start[n] > 0 or not ref > 0:
+            z0.append(mid[i])
+        else:
+            z0.append(np.log(start[n] / ref))
+    z0 = np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds])
+    out = [z0]
+    # a nonlinear parameter the previous fit lacks (a warm-up's or a lag's time
+    # constant, a second correlation time): scanned over its whole range, Δt to the
+    # record length, with the others at the previous fit, so the local search starts
+    # in the right basin (a coarse grid alone stops at local optima)
+    for i, n in enumerate(prob.znames):
+        if n in start or n not in prob.rates:
+            continue
+        for v in np.linspace(prob.bounds[i][0], prob.bounds[i][1], SCAN_POINTS):
+            z = z0.copy()
+            z[i] = v
+            out.append(z)
+    return out
 
-    Options as :func:`ml_fit`. BLAS is held to one thread meanwhile: the algebra here is on
-    tiny matrices, where OpenBLAS's thread hand-offs cost more than the work (measured:
-    0.65 s → 0.24 s for a 6-hour fit, benchmarks/ml_speed.py).
-    """
-    with threadpool_limits(limits=1, user_api="blas"):
-        return ml_fit(samples, model, **options)
 
-
-def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
-       fixed: Mapping[str, float] | None = None, n_local: int | None = None,
-       start: Mapping[str, float] | None = None, std_errors: bool = True,
-       hessian_passes: int = 2) -> FitResult:
-    """Exact maximum-likelihood fit of every free parameter of ``model``.
-
-    Args:
-        sigma: fix ``markov.sigma`` (the paper's "σ known"); same as ``fixed``.
-        fixed: parameters held at given values.
-        n_local: how many of the best grid starts get a local optimisation (default 2,
-            or 5 when the model has several rates, whose likelihood has several basins).
-        start: extra start point (natural parameter values, e.g. a previous fit).
-        std_errors: compute standard errors from the observed information.
-        hessian_passes: numerical Hessians behind them (the second with steps set from
-            the first pass's stds; one pass is enough to judge identification).
-    """
-    fixed = dict(fixed or {})
-    if sigma is not None:
-        fixed["markov.sigma"] = float(sigma)
-    samples = prepare(samples, "ml")
-    prob = _Problem(model, samples, fixed)
-    n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
-    require_samples(samples, samples.n_observed, n_free + 2, "ml")
-    warnings = list(samples.warnings)
+def _optimise(prob, starts: list[np.ndarray], n_local: int | None
+              ) -> tuple[np.ndarray, dict[str, Any], list[str]]:
+    """Maximise the concentrated ln L of ``prob`` (a :class:`_Problem`, or the joint
+    problem of several runs, :mod:`~gyrostand.core.multirun`) by L-BFGS-B from the best of
+    ``starts``: the searched point ``z``, the search's info and its warnings."""
+    warnings: list[str] = []
 
     def obj(z: np.ndarray) -> float:
         ll, _ = prob.profile(z)
         return -ll / prob.n_obs if np.isfinite(ll) else 1e10
 
-    starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
-    if start:
-        # a previous fit's values; parameters it lacks start mid-grid
-        z0 = []
-        mid = np.mean(starts, axis=0) if starts else np.zeros(len(prob.znames))
-        for i, n in enumerate(prob.znames):
-            ref = start.get(prob.ref, 1.0) if prob.ref and n in prob.stds else 1.0
-            if n not in start or not start[n] > 0 or not ref > 0:
-                z0.append(mid[i])
-            else:
-                z0.append(np.log(start[n] / ref))
-        z0 = np.clip(z0, [b[0] for b in prob.bounds], [b[1] for b in prob.bounds])
-        starts.append(z0)
-        # a nonlinear parameter the previous fit lacks (a warm-up's or a lag's time
-        # constant, a second correlation time): scanned over its whole range, Δt to the
-        # record length, with the others at the previous fit, so the local search starts
-        # in the right basin (a coarse grid alone stops at local optima)
-        for i, n in enumerate(prob.znames):
-            if n in start or n not in prob.rates:
-                continue
-            for v in np.linspace(prob.bounds[i][0], prob.bounds[i][1], SCAN_POINTS):
-                z = z0.copy()
-                z[i] = v
-                starts.append(z)
     at_bound: list[str] = []
     lo = np.array([b[0] for b in prob.bounds])
     hi = np.array([b[1] for b in prob.bounds])
@@ -358,13 +338,58 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
                 at_bound.append(name)
                 side = "lower" if v <= z_lo + 1e-3 else "upper"
                 what = ("≈ 0: no measurable contribution" if side == "lower" and
-                        model.kind(name) == "std" else "at the edge of its plausible range")
+                        prob.kind(name) == "std" else "at the edge of its plausible range")
                 warnings.append(f"ml: {name} is at its {side} search bound ({what})")
         info = {"iterations": int(best.nit), "converged": converged,
                 "at_bound": list(at_bound)}
     else:
         z = np.zeros(0)
         info = {"iterations": 0, "converged": True}
+    return z, info, warnings
+
+
+def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
+    """Exact maximum-likelihood fit of every free parameter of ``model``.
+
+    Options as :func:`ml_fit`. BLAS is held to one thread meanwhile: the algebra here is on
+    tiny matrices, where OpenBLAS's thread hand-offs cost more than the work (measured:
+    0.65 s → 0.24 s for a 6-hour fit, benchmarks/ml_speed.py).
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return ml_fit(samples, model, **options)
+
+
+def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
+       fixed: Mapping[str, float] | None = None, n_local: int | None = None,
+       start: Mapping[str, float] | None = None, std_errors: bool = True,
+       hessian_passes: int = 2) -> FitResult:
+    """Exact maximum-likelihood fit of every free parameter of ``model``.
+
+    Args:
+        sigma: fix ``markov.sigma`` (the paper's "σ known"); same as ``fixed``.
+        fixed: parameters held at given values.
+        n_local: how many of the best grid starts get a local optimisation (default 2,
+            or 5 when the model has several rates, whose likelihood has several basins).
+        start: extra start point (natural parameter values, e.g. a previous fit).
+        std_errors: compute standard errors from the observed information.
+        hessian_passes: numerical Hessians behind them (the second with steps set from
+            the first pass's stds; one pass is enough to judge identification).
+    """
+    fixed = dict(fixed or {})
+    if sigma is not None:
+        fixed["markov.sigma"] = float(sigma)
+    samples = prepare(samples, "ml")
+    prob = _Problem(model, samples, fixed)
+    n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
+    require_samples(samples, samples.n_observed, n_free + 2, "ml")
+    warnings = list(samples.warnings)
+
+    starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
+    if start:
+        starts += _starts_from(prob, starts, start)
+    z, info, more = _optimise(prob, starts, n_local)
+    warnings += more
+    at_bound = info.get("at_bound", [])
     p, gls_info, ll_prof = prob.natural(z)
     loglik = model.loglik(p, samples)
     if not np.isfinite(loglik):

@@ -12,6 +12,7 @@ from .model import Model
 
 if TYPE_CHECKING:
     from .ml import _Problem
+    from .multirun import _JointProblem
 
 
 def hessian(fun, x: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -62,7 +63,8 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
 
 
 def observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
-                         gls_info: np.ndarray, prob: _Problem, at_bound: list[str],
+                         gls_info: np.ndarray, prob: _Problem | _JointProblem,
+                         at_bound: list[str],
                          passes: int = 2):
     """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
 
@@ -78,7 +80,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         lin_std = {n: float(np.sqrt(max(ginv[i, i], 0.0))) for i, n in enumerate(prob.lin_free)}
     h = np.empty(x0.size)
     for i, n in enumerate(free):
-        kind = model.kind(n)
+        kind = prob.kind(n)
         if kind == "linear":
             h[i] = 0.1 * lin_std.get(n, 0.0) or 1e-4 * max(abs(x0[i]), 1.0)
         elif kind == "std":
@@ -91,7 +93,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         for n, v in zip(free, x, strict=True):
             q[n] = float(v)
         for n in free:
-            if model.kind(n) in ("rate", "time") and q[n] <= 0:
+            if prob.kind(n) in ("rate", "time") and q[n] <= 0:
                 return -np.inf
         return prob.full_loglik(q)
 
@@ -100,7 +102,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
     ll0 = ll(x0)
     at_bound = list(at_bound)
     for i, n in enumerate(free):
-        if model.kind(n) == "std" and n not in at_bound:
+        if prob.kind(n) == "std" and n not in at_bound:
             x = x0.copy()
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
@@ -119,9 +121,9 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         sd = np.sqrt(np.diag(cov))
         new_h = 0.1 * sd
         for i, n in enumerate(free):
-            if model.kind(n) in ("rate", "time"):
+            if prob.kind(n) in ("rate", "time"):
                 new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
-            elif model.kind(n) == "std":
+            elif prob.kind(n) == "std":
                 new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))
             new_h[i] = max(new_h[i], 1e-9 * max(abs(x0[i]), 1e-12))
         h = new_h

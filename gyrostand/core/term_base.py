@@ -164,7 +164,9 @@ class Term:
     deterministic signature for the residual cross-correlation; empty: it has one),
     ``signature_needs`` (parameters of the fitted model its signature uses),
     ``constant`` (its regressor is identically 1: the converging LKF enters it as an input
-    of the drift, see :mod:`gyrostand.core.lkf_relin`).
+    of the drift, see :mod:`gyrostand.core.lkf_relin`), ``per_run`` (its parameters
+    belong to one switch-on, not to the gyro: a joint fit of several runs,
+    :mod:`gyrostand.core.multirun`, gives each run its own).
     """
 
     name: ClassVar[str]
@@ -179,6 +181,7 @@ class Term:
     no_signature: ClassVar[str] = ""
     signature_needs: ClassVar[tuple[str, ...]] = ()
     constant: ClassVar[bool] = False
+    per_run: ClassVar[bool] = False
 
     def key(self, short: str) -> str:
         return f"{self.name}.{short}"

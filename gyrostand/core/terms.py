@@ -112,6 +112,7 @@ class Bias(Term):
     math = "+ b"
     bit = 3
     constant = True
+    per_run = True  # the turn-on bias: each switch-on has its own
     no_signature = "a constant: the residuals' cross-correlation removes their mean"
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
@@ -291,6 +292,7 @@ class Warmup(Term):
     )
     math = "+ A·exp(−(t − t₀)/τ_w)"
     bit = 9
+    per_run = True  # each switch-on has its own transient
     look_alikes = {"random_walk": "repeat the switch-on: a warm-up repeats, a random walk "
                                   "does not"}
 
