@@ -6,7 +6,7 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 from .common import add_format_args, emit
-from .workbench_args import add_subject_args, subject_of
+from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
     from ..core.candidates import Report
@@ -14,9 +14,10 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("diagnose", help="diagnose the current model of a run and rank the "
-                                        "missing effects")
-    add_subject_args(p)
+    p = sub.add_parser("diagnose", help="diagnose the current model of a run (or of several "
+                                        "runs of one gyro, jointly) and rank the missing "
+                                        "effects")
+    add_subject_args(p, several=True)
     add_format_args(p, "the diagnosis")
     p.set_defaults(func=run)
 
@@ -25,6 +26,12 @@ def run(args: argparse.Namespace) -> int:
     from ..render.views import DiagnosisView
     from ..workbench import run_diagnose
 
+    if len(args.run) > 1:
+        from ..workbench.joint import run_joint_diagnose
+
+        emit(run_joint_diagnose(subjects_of(args)), args.format)
+        return 0
+    args.run = args.run[0]
     subject = subject_of(args)
     rep = run_diagnose(subject)
     emit(DiagnosisView(rep, f"{subject.samples.source} (gyro {subject.gyro})",

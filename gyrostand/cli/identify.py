@@ -20,7 +20,10 @@ def add_parser(sub: Any) -> None:
         help="identify drift-model parameters from a CSV of 1-s samples",
         description="Identify the drift model from a CSV with columns t (s), drift, temp.",
     )
-    p.add_argument("samples", help="CSV with a header containing t, drift, temp")
+    p.add_argument("samples", nargs="+",
+                   help="CSV with a header containing t, drift, temp; several CSVs of runs of "
+                        "the same gyro are identified jointly (ml: shared physics, each run "
+                        "its own bias and warm-up; adds the turn-on bias repeatability)")
     p.add_argument("--method", choices=sorted(METHODS), default="ml",
                    help="identifier: lsq (the paper's least squares), lkf (its linearized "
                         "Kalman filter), ml (exact maximum likelihood; default)")
@@ -60,13 +63,22 @@ def run(args: argparse.Namespace) -> int:
     from ..core.data import Samples
     from ..core.model import Model
 
-    samples = Samples.read_csv(args.samples)
     model = Model.parse(args.model)
+    if len(args.samples) > 1:
+        from ..core.multirun import joint_ml
+
+        if args.method != "ml":
+            raise ConfigError(f"several runs are identified jointly by ml only (--method "
+                              f"{args.method} fits one run)")
+        runs = [Samples.read_csv(path) for path in args.samples]
+        emit(joint_ml(runs, model, sigma=args.sigma), args.format)
+        return 0
+    samples = Samples.read_csv(args.samples[0])
     opts = options_for(args)
     beta0 = getattr(opts, "beta0", None)  # a linearisation point (lkf)
     if beta0 is not None and beta0 * samples.dt >= 1.0:
         raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
-                          f"{1.0 / samples.dt:g} of {args.samples}")
+                          f"{1.0 / samples.dt:g} of {args.samples[0]}")
     result = registry.get(args.method).fit(samples, model, opts)
     emit(result, args.format)
     return 0

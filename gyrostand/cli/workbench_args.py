@@ -10,8 +10,16 @@ if TYPE_CHECKING:
     from ..workbench import Subject
 
 
-def add_subject_args(p: Any) -> None:
-    p.add_argument("run", help="a run folder, or a CSV with columns t, drift, temp")
+def add_subject_args(p: Any, several: bool = False) -> None:
+    """The subject's arguments; ``several``: one or more runs of the same gyro (studied
+    jointly when more than one)."""
+    if several:
+        p.add_argument("run", nargs="+",
+                       help="a run folder, or a CSV with columns t, drift, temp; several "
+                            "runs of the same gyro are studied jointly (shared physics, "
+                            "each run its own bias and warm-up)")
+    else:
+        p.add_argument("run", help="a run folder, or a CSV with columns t, drift, temp")
     p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     p.add_argument("--model", default=None,
                    help="start from this model (comma-separated terms) instead of the "
@@ -29,6 +37,16 @@ def subject_of(args: argparse.Namespace) -> Subject:
     check_run_folder(Path(args.run))
     return open_subject(args.run, gyro=args.gyro, model=args.model,
                         unit=getattr(args, "unit", None), dt=getattr(args, "dt", None))
+
+
+def subjects_of(args: argparse.Namespace) -> list[Subject]:
+    """Every run of ``args.run`` (a list), as one gyro's subjects."""
+    from ..workbench.subject import open_subjects
+
+    for run in args.run:
+        check_run_folder(Path(run))
+    return open_subjects(args.run, gyro=args.gyro, model=args.model,
+                         unit=getattr(args, "unit", None), dt=getattr(args, "dt", None))
 
 
 def check_run_folder(path: Path) -> None:

@@ -35,6 +35,7 @@ from .data import Samples
 from .diagnostics import Diagnosis, diagnose_fit, segments
 from .ml import ml
 from .model import Model, context
+from .multirun import base_name
 from .prederror import ModelError, model_error
 from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
 from .terms import TERMS, separation, term_class
@@ -163,9 +164,16 @@ def _halved(term: str) -> bool:
 
 
 def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
-    """ML fit of ``model``, started from ``base`` where it shares parameters."""
-    return ml(samples, model, start=base.values if base is not None else None,
-              n_local=2 if base is not None else None, hessian_passes=1)
+    """ML fit of ``model``, started from ``base`` where it shares parameters; several runs
+    (a tuple of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
+    start = base.values if base is not None else None
+    if isinstance(samples, tuple):
+        from .multirun import joint_ml
+
+        return joint_ml(samples, model, start=start,  # type: ignore[return-value]
+                        n_local=2 if base is not None else None, hessian_passes=1)
+    return ml(samples, model, start=start, n_local=2 if base is not None else None,
+              hessian_passes=1)
 
 
 def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:
@@ -174,19 +182,19 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
     ok = True
     for k in new:
         e = r.parameters[k]
-        if model.kind(k) == "linear" and not abs(e.value) >= 2.0 * e.std:
+        if model.kind(base_name(k)) == "linear" and not abs(e.value) >= 2.0 * e.std:
             ok = False
-    if not any(model.kind(k) == "linear" for k in new):
+    if not any(model.kind(base_name(k)) == "linear" for k in new):
         # an effect without a linear amplitude (a lag): its own parameter must be
         # determined to better than half its value
         for k in new:
-            if model.kind(k) == "time" and not abs(r.parameters[k].value) >= 2.0 * r.parameters[k].std:
+            if model.kind(base_name(k)) == "time" and not abs(r.parameters[k].value) >= 2.0 * r.parameters[k].std:
                 ok = False
     for w in r.warnings:
         if w.startswith("the likelihood is flat") and any(k in w for k in new):
             ok = False
     bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
-                  model.kind(k) in ("time", "rate"))
+                  model.kind(base_name(k)) in ("time", "rate"))
     return ok, bound
 
 
@@ -206,18 +214,19 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             log.warning("candidate %s could not be fitted: %s", term, exc)
             continue
         assert base.loglik is not None and r.loglik is not None
-        added = len(bigger.param_names) - len(model.param_names)
+        # parameters the candidate adds (a per-run one once per run in a joint fit)
+        added = len(r.parameters) - len(base.parameters)
         df = added + _extra_df(term)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
         p = float(chi2.sf(lr, df))
         if _halved(term):
             p *= 0.5
-        new = [k for k in bigger.param_names if k not in model.param_names]
+        new = [k for k in r.parameters if k not in base.parameters]
         stochastic = TERMS[term].n_states > 0
         ident, bound = identification(bigger, r, new) if not stochastic else (True, ())
         if stochastic:
             bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
-                          bigger.kind(k) == "rate")
+                          bigger.kind(base_name(k)) == "rate")
         note = ""
         if bound:
             note = f"{', '.join(bound)} at a search bound: not ranked"

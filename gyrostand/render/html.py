@@ -18,6 +18,7 @@ from importlib import resources
 from string import Template
 from typing import TYPE_CHECKING, Any
 
+from ..core.multirun import JointDiagnosis, JointFit
 from ..core.results import FitResult, unit_text
 from . import ByKind
 from . import text as _text
@@ -372,8 +373,17 @@ def run_report(view: RunReport) -> str:
         counts=_counts(view.stats), gyros=_gyros(view.finals, view.truths), paths=""))
 
 
+def _joint(title: str, text: str) -> str:
+    """Several runs of one gyro: the text tables on a page."""
+    return page(title, f"<pre>{e(text)}</pre>")
+
+
 KINDS: dict[type, Callable[[Any], str]] = {
     FitResult: fit_result,
+    JointFit: lambda j: _joint(f"gyrostand identify: ml, {len(j.runs)} runs",
+                               _text.joint_fit(j)),
+    JointDiagnosis: lambda d: _joint(f"gyrostand diagnose: {len(d.fit.runs)} runs",
+                                     _text.joint_diagnosis(d)),
     DiagnosisView: diagnosis,
     FitStepView: fit_step,
     AllanView: allan,

@@ -7,6 +7,7 @@ import json
 from collections.abc import Callable
 from typing import Any
 
+from ..core.multirun import JointDiagnosis, JointFit
 from ..core.results import FitResult
 from . import ByKind
 from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
@@ -21,6 +22,6 @@ def document(obj: Any) -> str:
 
 KINDS: dict[type, Callable[[Any], str]] = {
     kind: document for kind in (FitResult, DiagnosisView, FitStepView, AllanView, RunSummary,
-                                RunReport, ReportPage)}
+                                RunReport, ReportPage, JointFit, JointDiagnosis)}
 
 RENDERER = ByKind("json", KINDS)

@@ -7,12 +7,16 @@ A *subject* is opened from
   :mod:`gyrostand.runfolder`), or
 * a plain CSV with columns ``t, drift, temp`` (the model then comes from ``--model``).
 
+Several runs of one gyro (:func:`open_subjects`) are studied together under one model
+(:mod:`~gyrostand.workbench.joint`).
+
 The current model of a gyro is the model of its last ledger step
 (:mod:`~gyrostand.workbench.ledger`), else the configured one.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,7 +30,7 @@ from ..errors import DataError, GyrostandError
 from ..runfolder import LEDGER, csv_ledger_path, read_result, samples_path
 from .ledger import read_ledger
 
-__all__ = ["Subject", "open_subject", "DEFAULT_MODEL"]
+__all__ = ["Subject", "open_subject", "open_subjects", "DEFAULT_MODEL"]
 
 DEFAULT_MODEL = "markov,temp,bias"
 
@@ -122,3 +126,25 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
                    run_dir=run_dir, origin=origin, unit=unit or DRIFT_UNIT)
 
 
+
+
+def open_subjects(paths: Sequence[str | Path], *, gyro: str | None = None,
+                  model: str | Sequence[str] | None = None, unit: str | None = None,
+                  dt: float | None = None) -> list[Subject]:
+    """Several runs of one gyro (run folders or CSVs), each opened as :func:`open_subject`
+    (``--gyro`` picks the gyro in every folder). They are studied under one model: ``model``
+    if given, else the first run's current model."""
+    subjects = [open_subject(p, gyro=gyro, model=model, unit=unit, dt=dt) for p in paths]
+    first = subjects[0]
+    units = {s.unit for s in subjects}
+    if len(units) > 1:
+        raise DataError("the runs' drift units differ ("
+                        + ", ".join(f"{s.samples.source}: {s.unit}" for s in subjects)
+                        + "): not one gyro; give --unit to override")
+    if model is None:
+        subjects = [dataclasses.replace(s, model=first.model) for s in subjects]
+    folders = [s.gyro for s in subjects if s.origin == "run"]
+    if len(set(folders)) > 1:
+        raise DataError("the run folders hold different gyros (" + ", ".join(folders)
+                        + "): choose one with --gyro")
+    return subjects
