@@ -1,6 +1,9 @@
 """``gyrostand replay CONFIG LOG [LOG ...] [--out DIR] [--realtime] [--speed X]
 [--reader auto|process|inline]``; a LOG that is a run folder stands for its raw segments
-(``raw.blf``, ``raw-2.blf``, ...)."""
+(``raw.blf``, ``raw-2.blf``, ...). Logs that continue each other make one run; a log of
+another switch-on (frames more than ``sampling.max_gap`` after the previous log's end, or
+before it: e.g. days apart) starts its own run folder
+(:func:`~gyrostand.session.offline.split_runs`)."""
 
 from __future__ import annotations
 
@@ -22,7 +25,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("config", help="YAML session file")
     p.add_argument("log", nargs="+",
                    help="recorded CAN log(s), replayed one after the other, e.g. a run's "
-                        "raw.blf; a run folder stands for all its raw segments in order")
+                        "raw.blf; a run folder stands for all its raw segments in order; "
+                        "logs of different runs (frames days apart) give one run folder "
+                        "each")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="parent folder of the run folder (default: session.output)")
     p.add_argument("--realtime", action="store_true", help="pace frames to their timestamps")
@@ -38,22 +43,33 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..config import load_config
-    from ..session.offline import run_replay
+    from ..render.views import RunSummary
+    from ..session.offline import run_replays
     from ..session.outputs import raw_segments
+    from .common import emit
 
     cfg = load_config(args.config)
-    logs: list[Path] = []
+    groups: list[list[Path]] = []
     for item in args.log:
         p = Path(item)
         if p.is_dir():
             segs = raw_segments(p)
             if not segs:
                 raise CanEdgeError(f"{p}: no raw log (raw.blf) in this folder")
-            logs += segs
+            groups.append(list(segs))
         else:
-            logs.append(p)
-    outcome = run_replay(cfg, logs[0] if len(logs) == 1 else logs, out=args.out,
-                         realtime=args.realtime, speed=args.speed,
-                         parallel={"auto": None, "process": True, "inline": False}[args.reader])
-    print_outcome(outcome, sys.stdout, format=args.format)
+            groups.append([p])
+    outcomes = run_replays(cfg, groups, out=args.out, realtime=args.realtime, speed=args.speed,
+                           parallel={"auto": None, "process": True,
+                                     "inline": False}[args.reader])
+    if len(outcomes) == 1:
+        print_outcome(outcomes[0], sys.stdout, format=args.format)
+    elif args.format == "json":
+        import json
+
+        docs = [RunSummary(o, {}).to_dict() for o in outcomes]
+        sys.stdout.write(json.dumps({"runs": docs}, indent=2, allow_nan=False) + "\n")
+    else:
+        for o in outcomes:
+            emit(RunSummary(o, {}), args.format, sys.stdout)
     return 0

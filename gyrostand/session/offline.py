@@ -15,6 +15,7 @@ import json
 import logging
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
@@ -22,7 +23,7 @@ import numpy as np
 from .. import progress
 from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
-from ..can.logread import LogDamage
+from ..can.logread import LogDamage, read_log
 from ..can.replay import replay
 from ..config import SessionConfig
 from ..core.model import Model
@@ -33,7 +34,8 @@ from ..runfolder.layout import RESULT
 from .outputs import RunLog, make_run_dir, write_atomic
 from .pipeline import NullSink, Pipeline, RunOutcome
 
-__all__ = ["run_replay", "simulated_truths", "simulated_frames", "truth_params"]
+__all__ = ["run_replay", "run_replays", "split_runs", "log_span", "simulated_truths",
+           "simulated_frames", "truth_params"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +81,68 @@ def run_replay(cfg: SessionConfig,
         raise
     finally:
         runlog.close()
+
+
+def log_span(path: str | Path) -> tuple[float, float] | None:
+    """Frame time of a log's first and last frame (None: no frame). A BLF's file header
+    holds both; another log (or a BLF whose header lacks them: cut short) is read."""
+    path = Path(path)
+    if path.suffix.lower() == ".blf":
+        try:
+            reader = can.BLFReader(path)
+            first, last = float(reader.start_timestamp), float(reader.stop_timestamp)
+            reader.stop()
+            if 0 < first <= last:
+                return first, last
+        except Exception as exc:  # noqa: BLE001 - read_log below names a damaged file
+            log.debug("%s: no time span in the BLF header (%s); reading it", path, exc)
+    first_t: float | None = None
+    last_t = 0.0
+    for msg in read_log(path):
+        if first_t is None:
+            first_t = float(msg.timestamp)
+        last_t = float(msg.timestamp)
+    return None if first_t is None else (first_t, last_t)
+
+
+def split_runs(groups: Sequence[Sequence[str | Path]], max_gap: float) -> list[list[Path]]:
+    """Logs grouped into runs, in the given order. Each group (one log, or a run folder's
+    raw segments) belongs to one run; the next group continues it when its frames start
+    after the run's last frame by at most ``max_gap`` s (``sampling.max_gap``: a pause),
+    else it starts a new run (another switch-on, e.g. days later, or a log of an earlier
+    time): one run folder per run, never a whole run rejected as a time jump."""
+    runs: list[list[Path]] = []
+    end: float | None = None
+    for group in groups:
+        paths = [Path(p) for p in group]
+        spans = [sp for sp in (log_span(p) for p in paths) if sp is not None]
+        if not spans:
+            if runs:
+                runs[-1] += paths
+            else:
+                runs.append(paths)
+            continue
+        first, last = spans[0][0], max(sp[1] for sp in spans)
+        if end is not None and runs and end - 1.0 <= first <= end + max_gap:
+            runs[-1] += paths
+        else:
+            if end is not None:
+                log.info("%s starts %+.0f s from the previous log's end: a new run", paths[0],
+                         first - end)
+            runs.append(paths)
+        end = last if end is None or runs[-1] is paths else max(end, last)
+    return runs
+
+
+def run_replays(cfg: SessionConfig, groups: Sequence[Sequence[str | Path]], **options: Any
+                ) -> list[RunOutcome]:
+    """Replay logs as runs (:func:`split_runs`): one run folder each, each what replaying
+    that run's logs alone gives. ``options`` as :func:`run_replay`."""
+    runs = split_runs(groups, cfg.sampling.max_gap)
+    if len(runs) > 1:
+        log.info("%d runs in the logs: one run folder each", len(runs))
+    return [run_replay(cfg, paths[0] if len(paths) == 1 else paths, **options)
+            for paths in runs]
 
 
 def _mark_failed(path: Path, cfg: SessionConfig, source: str, run_dir: Path,
