@@ -7,15 +7,16 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.names import VOCABULARY
 from .common import add_format_args, emit
-from .workbench_args import add_subject_args, subject_of
+from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
     from ..workbench import FitStep
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("fit", help="add or remove model terms, refit, show before/after")
-    add_subject_args(p)
+    p = sub.add_parser("fit", help="add or remove model terms, refit, show before/after "
+                                   "(several runs of one gyro: jointly)")
+    add_subject_args(p, several=True)
     terms = ", ".join(VOCABULARY)
     p.add_argument("--add", action="append", default=[], metavar="TERM",
                    help=f"add a model term (repeatable); one of: {terms}")
@@ -29,6 +30,14 @@ def run(args: argparse.Namespace) -> int:
     from ..render.views import FitStepView
     from ..workbench import run_fit
 
+    if len(args.run) > 1:
+        from ..workbench.joint import run_joint_fit
+
+        subjects = subjects_of(args)
+        emit(FitStepView(run_joint_fit(subjects, args.add, args.remove),
+                         subjects[0].ledger_path), args.format)
+        return 0
+    args.run = args.run[0]
     subject = subject_of(args)
     step = run_fit(subject, args.add, args.remove)
     emit(FitStepView(step, subject.ledger_path), args.format)

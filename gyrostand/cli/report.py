@@ -7,13 +7,13 @@ import argparse
 from typing import Any
 
 from .common import add_format_args
-from .workbench_args import add_subject_args, subject_of
+from .workbench_args import add_subject_args, subject_of, subjects_of
 
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser("report", help="write an HTML report with plots of the current model",
                        description=__doc__)
-    add_subject_args(p)
+    add_subject_args(p, several=True)
     p.add_argument("--out", default=None, metavar="DIR",
                    help="folder of the report (default: report-<gyro>/ in the run folder, or "
                         "beside the CSV)")
@@ -22,6 +22,12 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if len(args.run) > 1:
+        from ..report.joint import write_joint_report
+
+        print(write_joint_report(subjects_of(args), args.out, format=args.format))
+        return 0
+    args.run = args.run[0]
     from ..report import write_report  # matplotlib only when a report is asked for
 
     print(write_report(subject_of(args), args.out, format=args.format))

@@ -6,12 +6,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 
-from ..core.multirun import JointDiagnosis, joint_diagnose
+from ..core.multirun import JointDiagnosis, joint_diagnose, joint_ml
 from ..errors import OutputError
 from .ledger import append_ledger
+from .steps import FitStep, changed_model, fit_step
 from .subject import Subject
 
-__all__ = ["run_joint_diagnose"]
+__all__ = ["run_joint_diagnose", "run_joint_fit"]
 
 log = logging.getLogger(__name__)
 
@@ -38,3 +39,28 @@ def run_joint_diagnose(subjects: Sequence[Subject], *, record: bool = True) -> J
             except OutputError as exc:
                 log.warning("%s (the diagnosis is not in the ledger)", exc)
     return rep
+
+
+def run_joint_fit(subjects: Sequence[Subject], add: Sequence[str] = (),
+                  remove: Sequence[str] = (), *, record: bool = True) -> FitStep:
+    """Refit the runs jointly with terms added/removed: before and after (joint fits), the
+    joint LR test (a per-run parameter counted once per run); a step in each run's
+    ledger."""
+    model = subjects[0].model
+    new = changed_model(model, add, remove)
+    runs = [s.samples for s in subjects]
+    before = joint_ml(runs, model)
+    after = joint_ml(runs, new, start=before.values)
+    step = fit_step(before, after, add, remove)
+    if record:
+        sources = [s.samples.source for s in subjects]
+        entry = step.to_dict()
+        for s, run in zip(subjects, after.runs, strict=True):
+            try:
+                append_ledger(s.ledger_path, {
+                    "gyro": s.gyro, "action": "fit", **entry, "joint": sources,
+                    "parameters": {k: e.to_dict() for k, e in run.parameters.items()},
+                })
+            except OutputError as exc:
+                log.warning("%s (the step is not in the ledger)", exc)
+    return step

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..core.candidates import Report, diagnose, fit_error
 from ..core.ml import ml
+from ..core.model import Model
 from ..core.prederror import ModelError
 from ..core.results import DRIFT_UNIT, FitResult
 from ..errors import GyrostandError, OutputError
@@ -95,31 +96,44 @@ class FitStep:
         }
 
 
-def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (),
-            *, record: bool = True) -> FitStep:
-    """Refit with terms added/removed; before and after side by side; ledger step."""
-    from scipy.stats import chi2
-
+def changed_model(model: Model, add: Sequence[str], remove: Sequence[str]) -> Model:
+    """``model`` with the terms ``remove`` removed and ``add`` added."""
     if not add and not remove:
         raise GyrostandError("fit needs at least one --add TERM or --remove TERM")
-    new = subject.model
+    new = model
     if remove:
         new = new.remove(*remove)
     if add:
         new = new.add(*add)
-    before = ml(subject.samples, subject.model)
-    after = ml(subject.samples, new, start=before.values)
+    return new
+
+
+def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
+             **errors: ModelError | None) -> FitStep:
+    """The step from the fit ``before`` to ``after`` (one run's, or a joint fit's: the
+    degrees of freedom are the parameters the fits differ by) with its LR test."""
+    from scipy.stats import chi2
+
     assert before.loglik is not None and after.loglik is not None
-    df = len(new.param_names) - len(subject.model.param_names)
+    df = len(after.parameters) - len(before.parameters)
     # the test of the smaller model against the bigger one: LR = 2 (ln L_big − ln L_small)
     lr = 2.0 * (after.loglik - before.loglik)
     if df < 0 or (df == 0 and not add):
         lr = -lr
     p = float(chi2.sf(max(lr, 0.0), abs(df))) if df else float("nan")
-    step = FitStep(before=before, after=after, added=tuple(add), removed=tuple(remove),
-                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0,
-                   before_error=fit_error(before, subject.samples, subject.unit),
-                   after_error=fit_error(after, subject.samples, subject.unit))
+    return FitStep(before=before, after=after, added=tuple(add), removed=tuple(remove),
+                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0, **errors)
+
+
+def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (),
+            *, record: bool = True) -> FitStep:
+    """Refit with terms added/removed; before and after side by side; ledger step."""
+    new = changed_model(subject.model, add, remove)
+    before = ml(subject.samples, subject.model)
+    after = ml(subject.samples, new, start=before.values)
+    step = fit_step(before, after, add, remove,
+                    before_error=fit_error(before, subject.samples, subject.unit),
+                    after_error=fit_error(after, subject.samples, subject.unit))
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),
