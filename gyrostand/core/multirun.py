@@ -45,7 +45,7 @@ from .data import Samples
 from .ml import _lsq_beta, _optimise, _Problem, _start_grid, _starts_from
 from .ml_cov import observed_covariance
 from .model import LOG_2PI, Model
-from .results import Estimate, FitResult
+from .results import Estimate, FitResult, _jsonable
 from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
@@ -375,10 +375,13 @@ class JointFit:
             "method": "ml", "model": list(self.model.names),
             "parameters": {k: e.to_dict() for k, e in self.shared.items()},
             "loglik": float(self.loglik),
+            "residual": {"rms": self.residual_rms},
             "n_samples": sum(r.n_samples for r in self.runs),
             "n_observed": self.n_observed,
+            "dt": self.runs[0].dt,
             "source": "; ".join(r.source for r in self.runs),
             "warnings": list(self.warnings),
+            "info": {k: v for k, v in self.info.items() if _jsonable(v)},
             "runs": [r.to_dict() for r in self.runs],
             "repeatability": (self.repeatability.to_dict() if self.repeatability is not None
                               else None),

@@ -60,6 +60,8 @@ def test_five_runs_share_gamma_and_keep_their_biases():
     assert rep is not None and rep.interval[0] < SPREAD < rep.interval[1]
     assert rep.p < 1e-6  # the biases differ far beyond their errors
     d = joint.to_dict()
+    single_keys = set(singles[0].to_dict())
+    assert single_keys <= set(d) and set(d) - single_keys == {"runs", "repeatability"}
     assert set(d["parameters"]) == {"markov.beta", "markov.sigma", "temp.gamma", "white.sigma"}
     assert len(d["runs"]) == 5 and d["repeatability"]["runs"] == 5
 
