@@ -111,6 +111,8 @@ def split_runs(groups: Sequence[Sequence[str | Path]], max_gap: float) -> list[l
     after the run's last frame by at most ``max_gap`` s (``sampling.max_gap``: a pause),
     else it starts a new run (another switch-on, e.g. days later, or a log of an earlier
     time): one run folder per run, never a whole run rejected as a time jump."""
+    if len(groups) <= 1:  # one run whatever its frames (nothing to read ahead)
+        return [[Path(p) for g in groups for p in g]]
     runs: list[list[Path]] = []
     end: float | None = None
     for group in groups:
