@@ -37,7 +37,7 @@ from .ml import ml
 from .model import Model, context
 from .prederror import ModelError, model_error
 from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
-from .terms import TERMS, separation, term_class
+from .terms import POSITIVE_KINDS, TERMS, separation, term_class
 from .validate import prepare
 
 log = logging.getLogger(__name__)
@@ -168,9 +168,19 @@ def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
               n_local=2 if base is not None else None, hessian_passes=1)
 
 
+def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
+    """A shape parameter at a search bound where its shape is still physical (a thermal
+    lag of a few Δt: none measurable; :class:`~gyrostand.core.term_base.Param`'s
+    ``physical_bounds``)."""
+    q = dict(model.params)[name]
+    return any(f"ml: {name} is at its {side} search bound" in w
+               for side in q.physical_bounds for w in r.warnings)
+
+
 def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:
     """Whether the effect a candidate adds is identified, and which of its time constants
-    or rates sit at a search bound (then the optimum is not an interior one)."""
+    or rates sit at a search bound (then the optimum is not an interior one; a shape
+    parameter at a bound where its shape is still physical does not count)."""
     ok = True
     for k in new:
         e = r.parameters[k]
@@ -186,7 +196,7 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
         if w.startswith("the likelihood is flat") and any(k in w for k in new):
             ok = False
     bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
-                  model.kind(k) in ("time", "rate"))
+                  model.kind(k) in POSITIVE_KINDS and not _physical_at_bound(model, r, k))
     return ok, bound
 
 
