@@ -216,6 +216,15 @@ class TempLag(Term):
 #: (shared by temp_rate and hysteresis; 0 = none: the plain shape)
 LAG_PARAM = Param("tau", "time", "s", "internal thermal lag the temperature rate acts "
                   "through (0: none)", default=0.0, physical_bounds=("lower",))
+#: that lag's search range: 3·Δt … a tenth of the record. A longer lag turns the rate into
+#: a slow curve that a warm-up or a trend explains (measured: on a warm-up + (T − T0)² run
+#: a temp_rate lagged by up to the record outranked warmup and lost to random_walk)
+LAG_RANGE = (3.0, 0.1)  # (steps Δt, records)
+
+
+def _lag_bounds(ctx: Context, duration: float) -> tuple[float, float]:
+    lo = LAG_RANGE[0] * ctx.dt
+    return lo, max(LAG_RANGE[1] * duration, 10 * lo)
 
 
 class TempRate(Term):
@@ -223,8 +232,8 @@ class TempRate(Term):
 
     The gradient is that of the gyro's element, whose temperature T_g lags the sensor's by
     its internal thermal lag τ (dT_g/dt = (T − T_g)/τ, :meth:`Context.lagged_rate`);
-    τ = 0 is the plain k · dT/dt. ML estimates τ (3·Δt … the record; at the lower bound:
-    no lag measurable); the online filters hold it at its given value, else 0.
+    τ = 0 is the plain k · dT/dt. ML estimates τ (3·Δt … a tenth of the record; at the
+    lower bound: no lag measurable); the online filters hold it at its given value, else 0.
     """
 
     name = "temp_rate"
@@ -248,6 +257,9 @@ class TempRate(Term):
 
     def prior_std(self, s: Scales) -> dict[str, float]:
         return {self.key("k"): 10 * s.y * 600.0}  # |k| dT/dt ≲ |y| at 0.1 degC/min
+
+    def search_bounds(self, q: Param, ctx: Context, duration: float) -> tuple[float, float] | None:
+        return _lag_bounds(ctx, duration) if q.name == "tau" else None
 
 
 #: the hysteresis width's search range, as fractions of the fastest (lagged) rate of the
@@ -287,6 +299,8 @@ class Hysteresis(Term):
         return {self.key("h"): math.tanh(rate / self.shape(p, "w"))}
 
     def search_bounds(self, q: Param, ctx: Context, duration: float) -> tuple[float, float] | None:
+        if q.name == "tau":
+            return _lag_bounds(ctx, duration)
         if q.name != "w":
             return None
         fastest = float(np.max(np.abs(ctx.temp_rate))) if ctx.temp.size else 0.0
