@@ -40,8 +40,10 @@ HOURS = 6.0
 
 
 def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
-                 progress: bool = False):
-    """(alarms, reasons Counter, seconds per run) over ``n_runs`` clean runs."""
+                 progress: bool = False, lrs: dict[str, list[tuple[float, int]]] | None = None):
+    """(alarms, reasons Counter, seconds per run) over ``n_runs`` clean runs; ``lrs``, when
+    given, collects each candidate's (LR, df) per run (under the null LR ~ χ²(df): mean
+    df)."""
     alarms = 0
     why: Counter[str] = Counter()
     t0 = time.perf_counter()
@@ -51,12 +53,18 @@ def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
                              start_offset=0.37 + 0.5 * (i % 2), end_cut=0.4,
                              profile=chamber_profile(hours))
             rep = run_diagnose(open_subject(path), record=False)
+            if lrs is not None:
+                for c in rep.candidates:
+                    lrs.setdefault(c.term, []).append((c.lr_stat, c.df))
             if not rep.adequate:
                 alarms += 1
                 for r in rep.reasons:
                     why[r.split(" (")[0].split(" significant")[0][:60]] += 1
             if progress and (i + 1) % 10 == 0:
-                print(f"  after {i + 1} runs: {alarms} false alarms", flush=True)
+                means = "".join(f", {t} mean LR {sum(x for x, _ in v) / len(v):.2f} (df "
+                                f"{v[0][1]})" for t, v in (lrs or {}).items()
+                                if t in ("hysteresis", "temp_rate"))
+                print(f"  after {i + 1} runs: {alarms} false alarms{means}", flush=True)
     return alarms, why, (time.perf_counter() - t0) / max(n_runs, 1)
 
 
@@ -70,7 +78,8 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 100
     hours = float(sys.argv[2]) if len(sys.argv) > 2 else HOURS
-    k, why, per = false_alarms(n, hours=hours, progress=True)
+    lrs: dict[str, list[tuple[float, int]]] = {}
+    k, why, per = false_alarms(n, hours=hours, progress=True, lrs=lrs)
     lo, hi = clopper_pearson(k, n)
     print(f"clean runs: {n} ({hours:g}-h chamber cycles from frames), false alarms: {k} = "
           f"{100 * k / n:.1f} % (95 % CI {100 * lo:.1f}–{100 * hi:.1f} %), nominal level of "
@@ -78,6 +87,11 @@ def main() -> None:
           f"({'PASS' if k / n <= TARGET else 'MISS'})")
     for reason, c in why.most_common():
         print(f"    {c:3d} x {reason}")
+    print("candidate LR on the clean runs (under the null, mean ≈ df):")
+    for term, v in lrs.items():
+        lr = [x for x, _ in v]
+        print(f"    {term:<12} mean LR {sum(lr) / len(lr):5.2f}  df {v[0][1]}  "
+              f"max {max(lr):6.2f}")
     print(f"{per:.2f} s per run (diagnose with every candidate)")
 
 

@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         model = Model.parse(args.model)
         params = {"white.sigma": 0.0, **given}
         hours = args.hours or 6.0
-    model.check_params(params)
+    model.check_params({**model.defaults, **params})
     limits = ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
                            hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
                            start=args.start)

@@ -1,9 +1,10 @@
 """``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S]
-[--format text|json|html] [--variant relin|paper]``."""
+[--unit U] [--dt S] [--format text|json|html] [--variant relin|paper]``."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from typing import Any
 
 from ..core import registry
@@ -33,6 +34,12 @@ def add_parser(sub: Any) -> None:
                         "included")
     p.add_argument("--sigma", type=number(positive=True), default=None,
                    help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
+    p.add_argument("--unit", default=None,
+                   help="the drift's unit (e.g. deg/h), shown in the table and the JSON "
+                        "'unit' (default: 'y')")
+    p.add_argument("--dt", type=number(positive=True), default=None,
+                   help="the CSV's sampling step in s (default: its most common step; "
+                        "missing rows are gaps)")
     add_format_args(p)
     g = p.add_argument_group("lsq options")
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
@@ -70,15 +77,17 @@ def run(args: argparse.Namespace) -> int:
         if args.method != "ml":
             raise ConfigError(f"several runs are identified jointly by ml only (--method "
                               f"{args.method} fits one run)")
-        runs = [Samples.read_csv(path) for path in args.samples]
+        runs = [Samples.read_csv(path, dt=args.dt) for path in args.samples]
         emit(joint_ml(runs, model, sigma=args.sigma), args.format)
         return 0
-    samples = Samples.read_csv(args.samples[0])
+    samples = Samples.read_csv(args.samples[0], dt=args.dt)
     opts = options_for(args)
     beta0 = getattr(opts, "beta0", None)  # a linearisation point (lkf)
     if beta0 is not None and beta0 * samples.dt >= 1.0:
         raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
                           f"{1.0 / samples.dt:g} of {args.samples[0]}")
     result = registry.get(args.method).fit(samples, model, opts)
+    if args.unit:
+        result = dataclasses.replace(result, unit=args.unit)
     emit(result, args.format)
     return 0

@@ -79,7 +79,7 @@ class SimulateSection:
                 if kind is None:
                     raise self.fail(f"{q}.params.{k}", f"not a parameter of {q}.model (its "
                                     f"parameters: {', '.join(kinds)})")
-                if kind in ("rate", "time"):  # positive, and resolvable on the bins
+                if kind in ("rate", "time", "width"):  # positive, resolvable on the bins
                     vals[str(k)] = self.number(v, f"{q}.params.{k}", lo=0.0, lo_open=True)
                     if kind == "rate" and vals[str(k)] * self.dt >= 1.0:
                         raise self.fail(f"{q}.params.{k}", f"{vals[str(k)]:g} 1/s must be "

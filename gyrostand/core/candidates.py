@@ -13,7 +13,10 @@ p-value is halved. Where a parameter is not identified under the null (a time co
 a second correlation time when the effect's amplitude is 0: Davies 1987) the supremum of
 the LR over it exceeds χ²(df); we measured false alarms of ``temp_lag`` at 2 of 4 seeds
 with χ²(1)/2 when ``temp_rate`` is in the model, so such candidates are tested
-conservatively with one more degree of freedom and no halving. Candidates are ranked by
+conservatively with one more degree of freedom and no halving. A term's shape parameters
+(``temp_rate.tau``, ``hysteresis.tau``/``w``: not identified when its amplitude is 0) are
+counted in its df, so a candidate's LR, the supremum over its shape, is referred to
+χ²(1 + shapes) (temp_rate 2, hysteresis 3). Candidates are ranked by
 ΔBIC, best first (BIC's ln n per parameter prefers the simpler of two effects that fit
 alike — a trend over a warm-up with a very long time constant — where AIC would not). The verdict is ``adequate`` when the innovations are white (Ljung–Box
 p ≥ 0.01) and no candidate is significant at 5 % after a Bonferroni correction for the
@@ -38,7 +41,7 @@ from .model import Model, context
 from .multirun import base_name
 from .prederror import ModelError, model_error
 from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
-from .terms import TERMS, separation, term_class
+from .terms import POSITIVE_KINDS, TERMS, separation, term_class
 from .validate import prepare
 
 log = logging.getLogger(__name__)
@@ -176,9 +179,19 @@ def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
               hessian_passes=1)
 
 
+def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
+    """A shape parameter at a search bound where its shape is still physical (a thermal
+    lag of a few Δt: none measurable; :class:`~gyrostand.core.term_base.Param`'s
+    ``physical_bounds``)."""
+    q = dict(model.params)[name]
+    return any(f"ml: {name} is at its {side} search bound" in w
+               for side in q.physical_bounds for w in r.warnings)
+
+
 def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:
     """Whether the effect a candidate adds is identified, and which of its time constants
-    or rates sit at a search bound (then the optimum is not an interior one)."""
+    or rates sit at a search bound (then the optimum is not an interior one; a shape
+    parameter at a bound where its shape is still physical does not count)."""
     ok = True
     for k in new:
         e = r.parameters[k]
@@ -194,7 +207,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
         if w.startswith("the likelihood is flat") and any(k in w for k in new):
             ok = False
     bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
-                  model.kind(base_name(k)) in ("time", "rate"))
+                  model.kind(base_name(k)) in POSITIVE_KINDS
+                  and not _physical_at_bound(model, r, k))
     return ok, bound
 
 
@@ -290,14 +304,46 @@ def _refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
     return best
 
 
+#: deterministic candidates tried, in their order, against the best stochastic one
+COMPETITORS_TRIED = 3
+
+
+def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
+                            alpha_each: float, chi2: Any) -> bool:
+    """Whether the stochastic candidate ``st`` explains the failure and the deterministic
+    ``d`` does not once ``st`` is in the model: both fitted together, each tested given the
+    other."""
+    both = model.add(d.term, st.term)
+    try:
+        assert d.result is not None
+        r = ml(samples, both, start=d.result.values, n_local=2)
+    except GyrostandError:
+        return False
+    if r.loglik is None:
+        return False
+    df_d = len(both.param_names) - len(model.add(st.term).param_names)
+    df_s = len(both.param_names) - len(model.add(d.term).param_names)
+    lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
+    lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
+    p_d = float(chi2.sf(lr_d, df_d + _extra_df(d.term)))
+    p_s = float(chi2.sf(lr_s, df_s + _extra_df(st.term)))
+    if _halved(st.term):
+        p_s *= 0.5
+    log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
+             d.term, st.term, p_d, st.term, d.term, p_s)
+    return p_d >= alpha_each and p_s < alpha_each
+
+
 def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
                        alpha_each: float) -> list[Candidate]:
     """Physical explanations before random ones.
 
     When a deterministic candidate d and a stochastic one s are both significant, both are
     fitted together: d is proposed first unless it is no longer significant once s is in
-    the model while s still is once d is in (then s is the real one). Either way the table
-    says they compete; the other is tested again after the first is added.
+    the model while s still is once d is in; then the next deterministic candidate is tried
+    (up to :data:`COMPETITORS_TRIED`), and only when none survives is s the real one.
+    Either way the table says they compete; the other is tested again after the first is
+    added.
     """
     from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
 
@@ -306,27 +352,16 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     sto = [c for c in sig if c.stochastic]
     if not det or not sto:
         return cands
-    d, st = det[0], sto[0]
-    first = d
-    both = model.add(d.term, st.term)
-    try:
-        assert d.result is not None
-        r = ml(samples, both, start=d.result.values, n_local=2)
-    except GyrostandError:
-        r = None
-    if r is not None and r.loglik is not None:
-        df_d = len(both.param_names) - len(model.add(st.term).param_names)
-        df_s = len(both.param_names) - len(model.add(d.term).param_names)
-        lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
-        lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
-        p_d = float(chi2.sf(lr_d, df_d + _extra_df(d.term)))
-        p_s = float(chi2.sf(lr_s, df_s + _extra_df(st.term)))
-        if _halved(st.term):
-            p_s *= 0.5
-        log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
-                 d.term, st.term, p_d, st.term, d.term, p_s)
-        if p_d >= alpha_each and p_s < alpha_each:
-            first = st
+    st = sto[0]
+    # the deterministic candidates in their order, until one survives the stochastic one
+    # (a flexible effect, e.g. a lagged rate, may lose to it where the true one would not)
+    for d in det[:COMPETITORS_TRIED]:
+        if not _random_explains_better(samples, model, d, st, alpha_each, chi2):
+            first = d
+            break
+    else:
+        d = det[0]
+        first = st
     other = st if first is d else d
     why = "both explain the failure; proposed first" if first is d else \
         "explains the failure better; proposed first"

@@ -242,7 +242,7 @@ def goal_function(goal: str, model: Model, params: Mapping[str, float],
                   ) -> Callable[[np.ndarray, tuple[str, ...]], float]:
     """``f(I, names)`` to minimize for ``goal`` (one of :data:`GOALS`); ``doubt``: the
     parameters the goal is about (default: every free one; all stay free)."""
-    names_all = tuple(free) if free is not None else model.param_names
+    names_all = tuple(free) if free is not None else model.free_names(params)
     if doubt is not None:
         bad = [n for n in doubt if n not in names_all]
         if bad:
@@ -322,7 +322,7 @@ def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
     """
     from scipy.optimize import minimize
 
-    model.check_params(params)
+    model.check_params({**model.defaults, **params})
     f_goal = goal_function(goal, model, params, free, doubt)
     ref = reference or standard_cycle(limits)
     count = [0]

@@ -33,12 +33,14 @@ def fisher_information(
     seed: int = 12345,
     rel_step: float = 1e-4,
 ) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Expected Fisher information of the ``free`` parameters (default: all).
+    """Expected Fisher information of the ``free`` parameters (default: all but a shape
+    parameter held at its plain default, :meth:`Model.free_names`).
 
     Returns ``(I, names)`` with ``I`` of shape (p, p). Parameters not in ``free`` are
     taken as known (e.g. ``markov.sigma`` in the paper's setting).
     """
-    names = tuple(free) if free is not None else model.param_names
+    names = tuple(free) if free is not None else model.free_names(params)
+    params = {**model.defaults, **params}  # a shape parameter left out: its plain one
     scale = max(abs(params[n]) for n in model.names_of_kind("std")) or 1.0
     h = np.array([rel_step * max(abs(params[n]), 1e-3 * scale if model.kind(n) == "std"
                                  else 1e-12) for n in names])

@@ -50,7 +50,9 @@ BETA_MAX_DT = 1.0
 
 
 def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> tuple[dict, str]:
-    """Values of the held noise parameters: ``given`` first, else an estimate."""
+    """Values of the held noise parameters: ``given`` first, else (a shape parameter)
+    its default, else an estimate."""
+    given = {**model.defaults, **given}
     need = [n for n in held_names(model) if n not in given]
     if not need:
         return {n: float(given[n]) for n in held_names(model)}, "given"

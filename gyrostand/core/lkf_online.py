@@ -130,6 +130,7 @@ class OnlineLKF:
         self.terms = lkf_terms(model)
         self.layout = lkf_layout(model)
         self.estimated = self.terms.estimated
+        held = {**model.defaults, **held}  # a shape parameter not given: its default
         missing = [n for n in held_names(model) if n not in held]
         if missing:
             raise ModelError(f"lkf needs value(s) for the held parameter(s) {', '.join(missing)}")
@@ -151,6 +152,7 @@ class OnlineLKF:
         self._u_prev: dict[str, float] = {}
         self._calls = 0
         self._Tbuf: list[float] = []
+        self._bin_memory: dict = {}  # causal filters of the rate (Bin.lagged_rate)
         self.held = {k: float(held[k]) for k in held_names(model)}
         self.prior_std = dict(prior_std or {})
         n = len(self.layout)
@@ -187,7 +189,8 @@ class OnlineLKF:
 
     def _now(self, T: float) -> Bin:
         """The newest sample as the terms' causal regressors see it."""
-        return Bin((self._calls - 1) * self.dt, T, self._causal_rate)
+        return Bin((self._calls - 1) * self.dt, T, self._causal_rate, self._bin_memory,
+                   self.dt)
 
     def _causal(self, now: Bin) -> dict[str, float]:
         out: dict[str, float] = {}

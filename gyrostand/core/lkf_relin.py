@@ -125,7 +125,7 @@ class RelinLKF:
         self.extras = [t.name for t in terms.extras]
         self.names = ["markov.beta", *self.inputs, *self.outputs]
         self.layout = ["delta_eps", *self.names, *self.extras]
-        self.held = {k: float(v) for k, v in held.items()}
+        self.held = {**model.defaults, **{k: float(v) for k, v in held.items()}}
         self.params = [off[2] if off and n == off[1] else n for n in self.names]
         need = [n for n in model.param_names if n not in self.params and n not in self.held]
         if need:
@@ -152,6 +152,7 @@ class RelinLKF:
         self._E = np.empty(cap)
         self._F = np.empty(cap)
         self._Tbuf: list[float] = []
+        self._bin_memory: dict = {}  # causal filters of the rate (Bin.lagged_rate)
         self.last: Relinearization | None = None
         self.relinearizations = 0
         self.total_passes = 0
@@ -256,7 +257,7 @@ class RelinLKF:
     def _causal_regressors(self, T: float) -> np.ndarray:
         """Output regressors at the newest bin from past bins only (online): each term's
         :meth:`~gyrostand.core.term_base.Term.causal_regressors`."""
-        now = Bin((self.n - 1) * self.dt, T, self._causal_rate)
+        now = Bin((self.n - 1) * self.dt, T, self._causal_rate, self._bin_memory, self.dt)
         vals: dict[str, float] = {}
         for key, term in self.output_terms:
             if key not in vals:

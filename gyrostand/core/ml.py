@@ -38,6 +38,7 @@ from .ml_cov import hessian as hessian
 from .ml_cov import observed_covariance
 from .model import LOG_2PI, Model, context
 from .results import Estimate, FitResult
+from .term_base import POSITIVE_KINDS
 from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
@@ -82,7 +83,7 @@ class _Problem:
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
         # positive nonlinear parameters (rates 1/s and time constants s), searched in log
         self.rates = [n for n, q in model.params
-                      if q.kind in ("rate", "time") and n not in self.fixed]
+                      if q.kind in POSITIVE_KINDS and n not in self.fixed]
         stds = [n for n in model.names_of_kind("std") if n not in self.fixed]
         # a noise level fixed at 0 stays 0 under a common scale: it does not stop concentration
         fixed_std = [n for n in model.names_of_kind("std")
@@ -101,7 +102,12 @@ class _Problem:
         self.znames = self.rates + self.stds
         dur = max(samples.t[-1] - samples.t[0], 10 * samples.dt)
         self.duration = dur
+        params = dict(model.params)
+
         def rate_bounds(n: str) -> tuple[float, float]:
+            own = model.term_of(n).search_bounds(params[n], self.ctx, dur)
+            if own is not None:  # the term's own range (a hysteresis width)
+                return float(np.log(own[0])), float(np.log(own[1]))
             if model.kind(n) == "time":
                 return time_bounds(samples.dt, dur)
             return np.log(1e-3 / dur), np.log(5.0 / samples.dt)

@@ -9,6 +9,7 @@ import numpy as np
 
 from .data import Samples
 from .model import Model
+from .term_base import POSITIVE_KINDS
 
 if TYPE_CHECKING:
     from .ml import _Problem
@@ -93,7 +94,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         for n, v in zip(free, x, strict=True):
             q[n] = float(v)
         for n in free:
-            if prob.kind(n) in ("rate", "time") and q[n] <= 0:
+            if prob.kind(n) in POSITIVE_KINDS and q[n] <= 0:
                 return -np.inf
         return prob.full_loglik(q)
 
@@ -121,7 +122,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         sd = np.sqrt(np.diag(cov))
         new_h = 0.1 * sd
         for i, n in enumerate(free):
-            if prob.kind(n) in ("rate", "time"):
+            if prob.kind(n) in POSITIVE_KINDS:
                 new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
             elif prob.kind(n) == "std":
                 new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))

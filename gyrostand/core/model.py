@@ -124,6 +124,20 @@ class Model:
         except KeyError:
             raise ModelError(f"{name!r} is not a parameter of the model {self}") from None
 
+    @cached_property
+    def defaults(self) -> dict[str, float]:
+        """The default of every shape parameter (:class:`~gyrostand.core.term_base.Param`'s
+        ``default``: the term's plain shape), for a simulation or a filter not given it."""
+        return {t.key(q.name): float(q.default) for t in self.terms for q in t.params
+                if q.default is not None}
+
+    def free_names(self, p: Mapping[str, float]) -> tuple[str, ...]:
+        """Every parameter but a shape parameter that ``p`` leaves out or holds at its
+        default (the plain shape, held as the online filters hold it): what an
+        information matrix is taken over by default."""
+        d = self.defaults
+        return tuple(n for n in self.param_names if n not in d or (n in p and p[n] != d[n]))
+
     def kind(self, name: str) -> str:
         return dict(self.params)[name].kind
 

@@ -79,6 +79,8 @@ class FitResult:
         info: method details (iterations, linearisation point, start values, ...).
         history: for recursive methods, estimates after every sample
             (name -> array (N,)) and their stds (``name + ':std'``).
+        unit: the drift's unit (``identify --unit``); ``y`` when nothing names it, and then
+            the JSON document has no ``unit`` key (as before there was one).
     """
 
     method: str
@@ -96,6 +98,7 @@ class FitResult:
     cov_names: tuple[str, ...] = ()
     info: Mapping[str, Any] = field(default_factory=dict)
     history: Mapping[str, np.ndarray] = field(default_factory=dict)
+    unit: str = DRIFT_UNIT
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
@@ -139,6 +142,10 @@ class FitResult:
         d["n_observed"] = self.n_observed
         d["dt"] = self.dt
         d["source"] = self.source
+        if self.unit != DRIFT_UNIT:
+            d["unit"] = self.unit
+            d["parameter_units"] = {k: unit_text(e.unit, self.unit)
+                                    for k, e in self.parameters.items()}
         d["warnings"] = list(self.warnings)
         d["info"] = {k: v for k, v in self.info.items() if _jsonable(v)}
         return d

@@ -30,7 +30,8 @@ def simulate(
 
     Give either a ``profile`` (sampled every ``dt`` up to ``duration`` or its end) or the
     arrays ``t`` (s) and ``temp`` (degC). ``params`` maps every ``<term>.<param>`` of the
-    model to its true value. Returns :class:`Samples` with ``source`` describing the truth.
+    model to its true value (a shape parameter left out takes its default: e.g. a
+    ``temp_rate`` without ``temp_rate.tau`` acts through no thermal lag). Returns :class:`Samples` with ``source`` describing the truth.
 
     >>> from gyrostand.core.profiles import paper_profile
     >>> m = Model.parse("markov,temp")
@@ -39,6 +40,7 @@ def simulate(
     >>> len(s), s.dt
     (2001, 1.0)
     """
+    params = {**model.defaults, **params}  # a shape left out: its plain one
     model.check_params(params)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if profile is not None:

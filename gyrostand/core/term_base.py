@@ -23,6 +23,7 @@ time.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -40,22 +41,36 @@ class Param:
     """One parameter of a term.
 
     ``kind`` is ``"rate"`` (positive, 1/s, enters nonlinearly), ``"time"`` (a positive time
-    constant, s, enters nonlinearly), ``"std"`` (a standard deviation or noise intensity,
-    >= 0) or ``"linear"`` (a coefficient the model is linear in).
+    constant, s, enters nonlinearly), ``"width"`` (a positive scale in another unit, e.g. a
+    switching width in degC/s, enters nonlinearly), ``"std"`` (a standard deviation or
+    noise intensity, >= 0) or ``"linear"`` (a coefficient the model is linear in).
+
+    ``default`` marks a *shape* parameter: a nonlinear parameter whose ``default`` value
+    gives the term its plain shape (``temp_rate.tau = 0``: no thermal lag). Maximum
+    likelihood estimates it like any other (within :meth:`Term.search_bounds`); the online
+    filters and least squares hold it at the value given, else at ``default``; a
+    simulation or design that leaves it out uses ``default``. ``physical_bounds`` names the
+    search bounds ("lower"/"upper") where the shape is still a physical one (a lag of a
+    few Δt: none measurable; the narrowest width: a sharp switch): an estimate there is
+    reported, but is no sign of an unphysical fit, so a candidate stays ranked.
     """
 
     name: str
     kind: str
     unit: str
     doc: str
+    default: float | None = None
+    physical_bounds: tuple[str, ...] = ()
 
 
 #: window of the temperature-rate estimate (s): a local quadratic fit (Savitzky-Golay)
 RATE_WINDOW_S = 61.0
-#: rate (degC/s) at which the hysteresis regressor tanh(dT/dt / r0) reaches 0.76
+#: default switching width w (degC/s) of hysteresis: tanh(dT/dt / w) reaches 0.76 at w
 HYSTERESIS_RATE = 1e-3
 #: reference temperature of temp2 (degC)
 T_REF = 25.0
+#: the kinds of positive nonlinear parameters (searched on a log scale)
+POSITIVE_KINDS = ("rate", "time", "width")
 
 
 @dataclass(frozen=True)
@@ -111,6 +126,25 @@ class Context:
             self._cache["rate"] = rate
         return self._cache["rate"]
 
+    def lagged_rate(self, tau: float) -> np.ndarray:
+        """The rate of the temperature T_g the gyro's element feels, lagged behind the
+        sensor by its internal thermal lag τ:
+
+            dT_g/dt = (T − T_g)/τ   ⇒   Ṫ_g = lag_τ(Ṫ),   d(Ṫ_g)/dt = (Ṫ − Ṫ_g)/τ
+
+        (the lag is linear and time-invariant, so the rate of the lagged temperature is the
+        lagged rate; both start soaked). τ ≤ 0 is no lag: :attr:`temp_rate` itself.
+        """
+        if not tau > 0:
+            return self.temp_rate
+        hit = self._cache.get("lagged_rate")
+        if hit is not None and hit[0] == tau:
+            return hit[1]
+        rate = self.temp_rate
+        out = self.through_markov(rate / tau, 1.0 / tau)
+        self._cache["lagged_rate"] = (tau, out)
+        return out
+
 
 #: where a term enters the model: a random ``process`` (a state of its own), the white
 #: measurement ``noise``, an ``input`` of the drift's dynamics (u(T) into dε/dt), an
@@ -137,19 +171,45 @@ class Scales:
 class Bin:
     """What an online filter knows at its newest bin, from that bin and earlier ones only:
     the time ``t`` (s) since its first bin, the temperature ``T`` (degC) and the causal
-    temperature rate (degC/s, computed on first use by ``rate_of()``)."""
+    temperature rate (degC/s, computed on first use by ``rate_of()``). ``memory`` is a dict
+    the filter keeps from bin to bin (its step ``dt``), where causal filters of the rate
+    (:meth:`lagged_rate`) keep their state."""
 
-    __slots__ = ("t", "T", "_rate_of", "_rate")
+    __slots__ = ("t", "T", "_rate_of", "_rate", "_memory", "_dt")
 
-    def __init__(self, t: float, T: float, rate_of: Callable[[], float]):
+    def __init__(self, t: float, T: float, rate_of: Callable[[], float],
+                 memory: dict | None = None, dt: float | None = None):
         self.t, self.T, self._rate_of = t, T, rate_of
         self._rate: float | None = None
+        self._memory, self._dt = memory, dt
 
     @property
     def rate(self) -> float:
         if self._rate is None:
             self._rate = self._rate_of()
         return self._rate
+
+    def lagged_rate(self, tau: float) -> float:
+        """The causal rate lagged by τ (:meth:`Context.lagged_rate`): a first-order filter
+        of :attr:`rate`, x_k = φ x_{k−1} + (1 − φ) rate_k, φ = e^{−Δt/τ}, started soaked at
+        the first bin's rate. τ ≤ 0: :attr:`rate`."""
+        if not tau > 0:
+            return self.rate
+        if self._memory is None or self._dt is None:
+            raise ModelError("this online filter keeps no memory between bins: a thermal "
+                             "lag of the temperature rate needs it")
+        key = ("lagged_rate", float(tau))
+        last = self._memory.get(key)
+        if last is not None and last[0] == self.t:
+            return last[1]
+        r = self.rate
+        if last is None:
+            x = r
+        else:
+            phi = math.exp(-self._dt / tau)
+            x = phi * last[1] + (1.0 - phi) * r
+        self._memory[key] = (self.t, x)
+        return x
 
 
 class Term:
@@ -255,6 +315,21 @@ class Term:
         return out
 
     # ---- maximum likelihood ---------------------------------------------------------------
+    def search_bounds(self, q: Param, ctx: Context, duration: float) -> tuple[float, float] | None:
+        """ML's search range (natural units) of a positive nonlinear parameter; None: the
+        rule of its kind (a time constant 3·Δt … the record, a rate 1e-3/record … 5/Δt)."""
+        return None
+
+    def shape(self, p: P, short: str) -> float:
+        """A shape parameter's value in ``p``, else its default (:class:`Param`)."""
+        key = self.key(short)
+        if key in p:
+            return float(p[key])
+        (q,) = [q for q in self.params if q.name == short]
+        if q.default is None:
+            raise ModelError(f"missing parameter value: {key}")
+        return float(q.default)
+
     def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
         """ML's start grid of a searched parameter: values of a rate (1/s) or a time (s);
         of a noise level, its ratio to the reference noise level."""

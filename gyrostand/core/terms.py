@@ -19,6 +19,7 @@ from .names import VOCABULARY as VOCABULARY  # re-exported; defined in names.py
 from .term_base import (
     HYSTERESIS_RATE,
     NULLS,
+    POSITIVE_KINDS,
     RATE_WINDOW_S,
     ROLES,
     T_REF,
@@ -32,7 +33,7 @@ from .term_base import (
 
 __all__ = ["TERMS", "BUILTIN", "ORIGIN", "register", "term_class", "summary_bits",
            "separation", "Term", "Param", "Context", "Bin", "Scales", "ROLES", "NULLS",
-           "HYSTERESIS_RATE", "T_REF", "RATE_WINDOW_S", "VOCABULARY"]
+           "HYSTERESIS_RATE", "T_REF", "RATE_WINDOW_S", "VOCABULARY", "POSITIVE_KINDS"]
 
 
 RANDOM = "a random process: no deterministic signature (it shows in the autocorrelation)"
@@ -212,12 +213,34 @@ class TempLag(Term):
         return -ctx.through_markov(ctx.temp_rate, p["markov.beta"])
 
 
+#: the gyro's internal thermal lag that an effect of the temperature rate acts through
+#: (shared by temp_rate and hysteresis; 0 = none: the plain shape)
+LAG_PARAM = Param("tau", "time", "s", "internal thermal lag the temperature rate acts "
+                  "through (0: none)", default=0.0, physical_bounds=("lower",))
+#: that lag's search range: 3·Δt … a tenth of the record. A longer lag turns the rate into
+#: a slow curve that a warm-up or a trend explains (measured: on a warm-up + (T − T0)² run
+#: a temp_rate lagged by up to the record outranked warmup and lost to random_walk)
+LAG_RANGE = (3.0, 0.1)  # (steps Δt, records)
+
+
+def _lag_bounds(ctx: Context, duration: float) -> tuple[float, float]:
+    lo = LAG_RANGE[0] * ctx.dt
+    return lo, max(LAG_RANGE[1] * duration, 10 * lo)
+
+
 class TempRate(Term):
-    """Thermal-gradient effect at the output: + k · dT/dt."""
+    """Thermal-gradient effect at the output: + k · dT_g/dt.
+
+    The gradient is that of the gyro's element, whose temperature T_g lags the sensor's by
+    its internal thermal lag τ (dT_g/dt = (T − T_g)/τ, :meth:`Context.lagged_rate`);
+    τ = 0 is the plain k · dT/dt. ML estimates τ (3·Δt … a tenth of the record; at the
+    lower bound: no lag measurable); the online filters hold it at its given value, else 0.
+    """
 
     name = "temp_rate"
-    params = (Param("k", "linear", "y*s/degC", "sensitivity to the temperature rate"),)
-    math = "+ k·dT/dt"
+    params = (Param("k", "linear", "y*s/degC", "sensitivity to the temperature rate"),
+              LAG_PARAM)
+    math = "+ k·dT_g/dt,  dT_g/dt = (T − T_g)/τ"
     bit = 6
     look_alikes = {
         "temp_lag": "a lag τ acts like −τ·γ·dT/dt during slow ramps; fast ramps or steps "
@@ -228,35 +251,67 @@ class TempRate(Term):
     }
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        return {self.key("k"): ctx.temp_rate}
+        return {self.key("k"): ctx.lagged_rate(self.shape(p, "tau"))}
 
     def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
-        return {self.key("k"): now.rate}
+        return {self.key("k"): now.lagged_rate(self.shape(p, "tau"))}
 
     def prior_std(self, s: Scales) -> dict[str, float]:
         return {self.key("k"): 10 * s.y * 600.0}  # |k| dT/dt ≲ |y| at 0.1 degC/min
 
+    def search_bounds(self, q: Param, ctx: Context, duration: float) -> tuple[float, float] | None:
+        return _lag_bounds(ctx, duration) if q.name == "tau" else None
+
+
+#: the hysteresis width's search range, as fractions of the fastest (lagged) rate of the
+#: record: from a sharp switch (1 %) to a response that is nearly linear in the rate (1×)
+WIDTH_RANGE = (0.01, 1.0)
+
 
 class Hysteresis(Term):
-    """Different offsets when heating and cooling: + h · tanh((dT/dt) / r₀).
+    """Different offsets when heating and cooling: + h · tanh((dT_g/dt) / w).
 
-    A smooth sign with r₀ = 1e-3 degC/s (0.06 degC/min): +h while heating, −h while
-    cooling, ≈ 0 at a soak.
+    A smooth sign that switches over a width w of temperature rates (degC/s; the default
+    1e-3 degC/s = 0.06 degC/min): +h while heating, −h while cooling, ≈ 0 at a soak. The
+    rate is the gyro element's, lagged by its internal thermal lag τ as in ``temp_rate``.
+    ML estimates w (1 % … 100 % of the record's fastest rate) and τ; the online filters
+    hold them at their given values, else the defaults (w = 1e-3, τ = 0).
     """
 
     name = "hysteresis"
-    params = (Param("h", "linear", "y", "half the heating/cooling offset difference"),)
-    math = "+ h·sign(dT/dt)"
+    params = (
+        Param("h", "linear", "y", "half the heating/cooling offset difference"),
+        LAG_PARAM,
+        Param("w", "width", "degC/s", "temperature rate over which the offset switches",
+              default=HYSTERESIS_RATE, physical_bounds=("lower",)),
+    )
+    math = "+ h·tanh(dT_g/dt / w),  dT_g/dt = (T − T_g)/τ"
     bit = 7
     look_alikes = {"temp_lag": "long soaks after each ramp separate them: a lag decays "
                                "during the soak, hysteresis holds until the direction "
                                "changes"}
 
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        return {self.key("h"): np.tanh(ctx.temp_rate / HYSTERESIS_RATE)}
+        rate = ctx.lagged_rate(self.shape(p, "tau"))
+        return {self.key("h"): np.tanh(rate / self.shape(p, "w"))}
 
     def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
-        return {self.key("h"): math.tanh(now.rate / HYSTERESIS_RATE)}
+        rate = now.lagged_rate(self.shape(p, "tau"))
+        return {self.key("h"): math.tanh(rate / self.shape(p, "w"))}
+
+    def search_bounds(self, q: Param, ctx: Context, duration: float) -> tuple[float, float] | None:
+        if q.name == "tau":
+            return _lag_bounds(ctx, duration)
+        if q.name != "w":
+            return None
+        fastest = float(np.max(np.abs(ctx.temp_rate))) if ctx.temp.size else 0.0
+        fastest = max(fastest, 10 * HYSTERESIS_RATE * WIDTH_RANGE[0])
+        return WIDTH_RANGE[0] * fastest, WIDTH_RANGE[1] * fastest
+
+    def start_values(self, q: Param, duration: float, dt: float) -> list[float]:
+        if q.name == "w":
+            return [HYSTERESIS_RATE / 3, HYSTERESIS_RATE, 3 * HYSTERESIS_RATE]
+        return super().start_values(q, duration, dt)
 
 
 class Trend(Term):
@@ -320,7 +375,7 @@ if tuple(TERMS) != VOCABULARY or [c.bit for c in TERMS.values()] != list(range(l
 #: where each registered plugin term came from (name -> "module:Class" and how it was found)
 ORIGIN: dict[str, str] = {}
 _NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
-_KINDS = ("rate", "time", "std", "linear")
+_KINDS = (*POSITIVE_KINDS, "std", "linear")
 
 
 def register(cls: type[Term], origin: str = "") -> type[Term]:

@@ -100,6 +100,8 @@ def resolve_lkf_point(model: Model, cfg: LkfOptions, samples: Samples | None) ->
     point = {"markov.beta": cfg.beta0, "temp.gamma": cfg.gamma0, "bias.b": cfg.b0}
     need_point = [k for k, v in point.items() if v is None and
                   (k == "markov.beta" or k.split(".")[0] in model)]
+    for k, v in model.defaults.items():  # a shape parameter not given: its default
+        given.setdefault(k, v)
     need_held = [n for n in held_names(model) if n not in given]
     source = "config"
     if need_point or need_held:

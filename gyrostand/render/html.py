@@ -245,9 +245,9 @@ def _ledger_row(st: Mapping[str, Any]) -> list[str]:
 
 def fit_result(r: FitResult) -> str:
     rows = [[f"<code>{e(k)}</code>", num(x.value, ".6g"),
-             "fixed" if x.fixed else num(x.std, ".4g"), e(unit_text(x.unit))]
+             "fixed" if x.fixed else num(x.std, ".4g"), e(unit_text(x.unit, r.unit))]
             for k, x in r.parameters.items()]
-    stats = [["residual RMS (y)", num(r.residual_rms, ".6g")]]
+    stats = [[f"residual RMS ({e(r.unit)})", num(r.residual_rms, ".6g")]]
     if r.loglik is not None:
         stats.insert(0, ["log-likelihood", num(r.loglik, ".6f")])
     model = ",".join(r.model.names)

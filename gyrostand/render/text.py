@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from ..core.multirun import JointDiagnosis, JointFit
-from ..core.results import UNIT_TEXT, FitResult, unit_text
+from ..core.results import DRIFT_UNIT, UNIT_TEXT, FitResult, unit_text
 from . import ByKind
 from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
@@ -44,14 +44,17 @@ def fit_result(r: FitResult) -> str:
         "",
         f"{'parameter':<16} {'value':>14} {'std':>12}  unit",
     ]
+    named = r.unit != DRIFT_UNIT  # the drift's unit given (identify --unit)
     for k, e in r.parameters.items():
         std = "fixed" if e.fixed else f"{e.std:12.4g}"
-        lines.append(f"{k:<16} {e.value:14.6g} {std:>12}  {UNIT_TEXT.get(e.unit, e.unit)}")
+        unit = unit_text(e.unit, r.unit) if named else UNIT_TEXT.get(e.unit, e.unit)
+        lines.append(f"{k:<16} {e.value:14.6g} {std:>12}  {unit}")
     lines.append("")
     if r.loglik is not None:
         lines.append(f"log-likelihood {r.loglik:.6f}")
-    lines.append(f"residual RMS   {r.residual_rms:.6g} y")
-    lines.append("(y = the drift's unit, e.g. deg/h)")
+    lines.append(f"residual RMS   {r.residual_rms:.6g} {r.unit}")
+    if not named:
+        lines.append("(y = the drift's unit, e.g. deg/h)")
     for w in r.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)

@@ -107,7 +107,8 @@ def test_df_shown_is_the_df_behind_the_p_value(tmp_path):
 
     rep = run_diagnose(open_subject(chamber_run(tmp_path, [], {}, seed=8)), record=False)
     by = {c.term: c for c in rep.candidates}
-    assert by["temp_lag"].df == 2 and by["markov2"].df == 3 and by["temp_rate"].df == 1
+    assert by["temp_lag"].df == 2 and by["markov2"].df == 3 and by["temp_rate"].df == 2
+    assert by["hysteresis"].df == 3  # h and its shape: the lag τ and the width w
     for c in rep.candidates:
         p = chi2.sf(c.lr_stat, c.df) * (0.5 if c.term == "random_walk" else 1.0)
         assert c.p_value == pytest.approx(p, rel=1e-9, abs=1e-300)
