@@ -183,7 +183,7 @@ def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
     """A shape parameter at a search bound where its shape is still physical (a thermal
     lag of a few Δt: none measurable; :class:`~gyrostand.core.term_base.Param`'s
     ``physical_bounds``)."""
-    q = dict(model.params)[name]
+    q = dict(model.params)[base_name(name)]  # a run's own copy (name@k): its term's
     return any(f"ml: {name} is at its {side} search bound" in w
                for side in q.physical_bounds for w in r.warnings)
 
