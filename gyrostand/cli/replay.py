@@ -10,7 +10,13 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CanEdgeError
-from .common import add_format_args, number, print_outcome
+from .common import (
+    add_data_format_args,
+    add_format_args,
+    number,
+    print_outcome,
+    with_data_formats,
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -32,6 +38,7 @@ def add_parser(sub: Any) -> None:
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "
                         "(default): a process for logs of 1 MiB or more with 2+ CPUs, unless --realtime")
+    add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
@@ -41,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from ..session.offline import run_replay
     from ..session.outputs import raw_segments
 
-    cfg = load_config(args.config)
+    cfg = with_data_formats(load_config(args.config), args)
     logs: list[Path] = []
     for item in args.log:
         p = Path(item)
