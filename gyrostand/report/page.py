@@ -162,6 +162,7 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
                 png = buf.getvalue()
                 drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
                     "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
+                (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
             else:
                 _atomic(out / plot.file, _png(fig))
                 drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))

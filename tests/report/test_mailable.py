@@ -43,13 +43,16 @@ def _cli(argv: list[str]) -> str:
 def single(chamber_csv, tmp_path_factory) -> Path:
     """``gyrostand report CSV --single-file --out DIR``: the printed path."""
     out = tmp_path_factory.mktemp("single") / "rep"
+    out.mkdir()
+    (out / "allan.png").write_bytes(b"an earlier folder report's figure")
     return Path(_cli(["report", str(chamber_csv), "--unit", "deg/h", "--single-file",
                       "--out", str(out)]).strip())
 
 
 def test_single_file_report_is_one_page_with_every_figure_embedded(single):
     assert single.name == "report.html"
-    assert [p.name for p in single.parent.iterdir()] == ["report.html"]  # no PNG, no temp
+    # no PNG (an earlier folder report's removed), no temporary file
+    assert [p.name for p in single.parent.iterdir()] == ["report.html"]
     page = parse(single)  # well-formed HTML5: parse() asserts the nesting
     assert page.doctype.lower() == "doctype html"
     assert {"script", "link", "iframe"}.isdisjoint(page.tags)
