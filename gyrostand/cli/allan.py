@@ -55,21 +55,14 @@ def _drift_unit(subject: Subject) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.allan import allan_table, thermal_residual
     from ..core.ml import ml
     from ..render.views import AllanView
     from ..workbench import open_subject
 
     subject = open_subject(args.run, gyro=args.gyro, model=args.model)
     unit = args.unit or _drift_unit(subject)
-    s = subject.samples
-    fit = ml(s, subject.model)
-    raw = allan_table(s.drift, s.dt, unit=unit, label="raw drift", level=args.level)
-    resid = allan_table(thermal_residual(fit.model, fit.values, s), s.dt, unit=unit,
-                        label=f"residual after {','.join(subject.model.names)}",
-                        level=args.level)
-    emit(AllanView(subject.gyro, s.source, unit, s.dt, tuple(subject.model.names),
-                   args.level, raw, resid), args.format)
+    emit(AllanView.of(subject, ml(subject.samples, subject.model), unit, args.level),
+         args.format)
     return 0
 
 

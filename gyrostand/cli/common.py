@@ -56,6 +56,33 @@ def with_bus_overrides(cfg: SessionConfig, args: argparse.Namespace) -> SessionC
     return dataclasses.replace(cfg, bus=MappingProxyType({**cfg.bus, **over}))
 
 
+def add_data_format_args(p: Any) -> None:
+    """``--data-format FORMAT`` (repeatable): a format the run also writes its samples and
+    estimates in at its end, beside the CSVs (adds to the session's ``formats:``)."""
+    from ..runfolder.layout import DATA_FORMATS
+
+    p.add_argument("--data-format", action="append", choices=tuple(DATA_FORMATS),
+                   default=[], metavar="FORMAT",
+                   help="also write the run's data as FORMAT at its end, beside the CSVs "
+                        "(which stay): parquet (<gyro>/samples.parquet, estimates.parquet; "
+                        "pyarrow) or mf4 (<run>.mf4; asammdf); repeatable; adds to "
+                        "session.formats")
+
+
+def with_data_formats(cfg: SessionConfig, args: argparse.Namespace) -> SessionConfig:
+    """``cfg`` with the ``--data-format`` options added to its ``formats``."""
+    from ..config.parser import missing_packages
+    from ..errors import ConfigError
+
+    extra = [f for f in getattr(args, "data_format", []) if f not in cfg.formats]
+    if not extra:
+        return cfg
+    missing = missing_packages(tuple(extra))
+    if missing:
+        raise ConfigError(f"--data-format: {missing}")
+    return dataclasses.replace(cfg, formats=(*cfg.formats, *extra))
+
+
 def add_format_args(p: Any, what: str = "the result", default: str = FORMATS[0],
                     verb: str = "print") -> None:
     """``--format text|json|html`` and ``--json``, its synonym."""

@@ -14,7 +14,15 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
-from .common import add_bus_args, add_format_args, print_outcome, progress, with_bus_overrides
+from .common import (
+    add_bus_args,
+    add_data_format_args,
+    add_format_args,
+    print_outcome,
+    progress,
+    with_bus_overrides,
+    with_data_formats,
+)
 
 #: where the demo config lives: the repository next to the package, else the cwd
 CANDIDATES = (Path(__file__).resolve().parents[2] / "configs" / "demo.yaml",
@@ -37,6 +45,7 @@ def add_parser(sub: Any) -> None:
                    help="parent folder under which the run folder <name>-<UTC time>/ is "
                         "made (default: session.output)")
     add_bus_args(p)
+    add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
@@ -47,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     from ..session.offline import simulated_frames, truth_params
     from ..session.stand import SimulatedStand
 
-    cfg = with_bus_overrides(load_config(args.config or find_demo_config()), args)
+    cfg = with_data_formats(with_bus_overrides(load_config(args.config or find_demo_config()),
+                                               args), args)
     sim = cfg.simulate
     if sim is None:
         raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")

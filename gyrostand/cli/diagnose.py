@@ -23,7 +23,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render.views import DiagnosisView
+    from .. import progress
+    from ..render.views import AllanView, DiagnosisView
     from ..workbench import run_diagnose
 
     if len(args.run) > 1:
@@ -34,8 +35,10 @@ def run(args: argparse.Namespace) -> int:
     args.run = args.run[0]
     subject = subject_of(args)
     rep = run_diagnose(subject)
+    with progress.stage("diagnose", "Allan tables"):
+        allan = AllanView.of_diagnosis(subject, rep)
     emit(DiagnosisView(rep, f"{subject.samples.source} (gyro {subject.gyro})",
-                       subject.ledger_path), args.format)
+                       subject.ledger_path, allan), args.format)
     return 0
 
 

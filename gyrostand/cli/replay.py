@@ -13,7 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CanEdgeError
-from .common import add_format_args, number, print_outcome
+from .common import (
+    add_data_format_args,
+    add_format_args,
+    number,
+    print_outcome,
+    with_data_formats,
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -37,6 +43,7 @@ def add_parser(sub: Any) -> None:
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "
                         "(default): a process for logs of 1 MiB or more with 2+ CPUs, unless --realtime")
+    add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
@@ -48,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ..session.outputs import raw_segments
     from .common import emit
 
-    cfg = load_config(args.config)
+    cfg = with_data_formats(load_config(args.config), args)
     groups: list[list[Path]] = []
     for item in args.log:
         p = Path(item)

@@ -1,5 +1,6 @@
-"""``gyrostand report RUN [--format html|text|json]``: one HTML page with PNG plots of the
-current model (or the diagnosis as ``report.txt`` / ``report.json``); prints its path."""
+"""``gyrostand report RUN [--single-file] [--format html|text|json]``: one HTML page with
+PNG plots of the current model (beside it, or with ``--single-file`` embedded in it: one
+file to mail), or the diagnosis as ``report.txt`` / ``report.json``; prints its path."""
 
 from __future__ import annotations
 
@@ -17,6 +18,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", default=None, metavar="DIR",
                    help="folder of the report (default: report-<gyro>/ in the run folder, or "
                         "beside the CSV)")
+    p.add_argument("--single-file", action="store_true",
+                   help="one HTML file to mail: the figures embedded in report.html "
+                        "(base64 PNG), no PNG files beside it")
     add_format_args(p, "the report", default="html", verb="write")
     p.set_defaults(func=run)
 
@@ -30,5 +34,6 @@ def run(args: argparse.Namespace) -> int:
     args.run = args.run[0]
     from ..report import write_report  # matplotlib only when a report is asked for
 
-    print(write_report(subject_of(args), args.out, format=args.format))
+    print(write_report(subject_of(args), args.out, format=args.format,
+                       single_file=args.single_file))
     return 0

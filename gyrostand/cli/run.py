@@ -9,11 +9,13 @@ from typing import TYPE_CHECKING, Any
 
 from .common import (
     add_bus_args,
+    add_data_format_args,
     add_format_args,
     number,
     print_outcome,
     progress,
     with_bus_overrides,
+    with_data_formats,
 )
 
 if TYPE_CHECKING:
@@ -46,6 +48,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--check", action="store_true",
                    help="validate the session file (keys, DBC, signal mapping, response "
                         "frames) and print what it maps, without opening the bus")
+    add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
 
@@ -54,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..session.live import run_live
 
-    cfg = with_bus_overrides(load_config(args.config), args)
+    cfg = with_data_formats(with_bus_overrides(load_config(args.config), args), args)
     if args.check:
         print(describe_session(cfg))
         return 0

@@ -13,6 +13,7 @@ import yaml
 from gyrostand.can.codes import check_width, role_codes
 from gyrostand.can.dbc import MessageRef, find_message, load_dbc
 from gyrostand.errors import CanEdgeError, ConfigError
+from gyrostand.runfolder.layout import DATA_FORMATS
 
 from .gyros import GyroSections
 from .schema import (
@@ -65,6 +66,16 @@ def decode_text(raw: bytes, path: str | Path) -> str:
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}: "
                           f"{raw[exc.start:exc.start + 4]!r}); save it as UTF-8") from None
+
+
+def missing_packages(formats: tuple[str, ...]) -> str:
+    """What is missing to write ``formats`` (of :data:`DATA_FORMATS`): a sentence naming
+    each absent package and how to install it, or ``""``."""
+    import importlib.util
+
+    absent = [f"{f} needs the {DATA_FORMATS[f]} package" for f in formats
+              if importlib.util.find_spec(DATA_FORMATS[f]) is None]
+    return "; ".join(absent) + " (pip install 'gyrostand[formats]')" if absent else ""
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -228,12 +239,19 @@ class _Parser(GyroSections, SimulateSection):
         self.match = top.get("match", "id")  # the default of every channel's `match`
         if self.match not in MATCHES:
             raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
-        sess = self.mapping(top["session"], "session", ("name",), ("output", "fsync"))
+        sess = self.mapping(top["session"], "session", ("name",),
+                            ("output", "fsync", "formats"))
         name = self.string(sess["name"], "session.name")
         if not _NAME_RE.match(name):
             raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
         fsync = bool(self.boolean(sess.get("fsync", True), "session.fsync"))
+        formats: tuple[str, ...] = ()
+        if sess.get("formats") not in (None, []):
+            formats = self.names(sess["formats"], "session.formats", tuple(DATA_FORMATS))
+            missing = missing_packages(formats)
+            if missing:
+                raise self.fail("session.formats", missing)
         bus = top["bus"]
         if not isinstance(bus, Mapping) or not bus:
             raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
@@ -265,7 +283,7 @@ class _Parser(GyroSections, SimulateSection):
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
         reconnect = self.reconnect(top.get("reconnect") or {})
         return SessionConfig(
-            path=Path(self.source), name=name, output=output, fsync=fsync,
+            path=Path(self.source), name=name, output=output, fsync=fsync, formats=formats,
             bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
             reconnect=reconnect,

@@ -177,6 +177,9 @@ class SessionConfig:
     #: live runs: each once-a-second acknowledgement is fdatasync'ed (raw log first,
     #: then samples and estimates), so it survives a power cut, not only a crash
     fsync: bool = True
+    #: formats written beside the CSVs at the run's end (``session.formats``; of
+    #: :data:`gyrostand.runfolder.layout.DATA_FORMATS`)
+    formats: tuple[str, ...] = ()
 
     def gyro(self, name: str) -> GyroConfig:
         for g in self.gyros:

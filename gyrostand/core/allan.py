@@ -51,6 +51,7 @@ import numpy as np
 from .data import Samples
 from .diagnostics import allan_deviation
 from .model import Model, context
+from .results import FitResult
 
 __all__ = [
     "BIAS_FACTOR",
@@ -58,6 +59,7 @@ __all__ = [
     "AllanFigure",
     "AllanTable",
     "allan_table",
+    "drift_tables",
     "edf_overlapping",
     "chi2_quantile",
     "thermal_residual",
@@ -282,3 +284,15 @@ def thermal_residual(model: Model, params: Mapping[str, float], samples: Samples
     theta = np.array([params[k] for k in model.names_of_kind("linear")])
     det = X @ theta if theta.size else np.zeros(len(samples))
     return np.asarray(samples.drift, dtype=float) - det
+
+
+def drift_tables(samples: Samples, fit: FitResult, *, unit: str = "y",
+                 level: float = 0.95) -> tuple[AllanTable, AllanTable]:
+    """The two tables a gyro test reports: of the raw drift, and of the residual after
+    ``fit``'s thermal model (:func:`thermal_residual` at its estimates), both sampled every
+    ``samples.dt`` s, labelled ``raw drift`` and ``residual after <model>``."""
+    raw = allan_table(samples.drift, samples.dt, unit=unit, label="raw drift", level=level)
+    resid = allan_table(thermal_residual(fit.model, fit.values, samples), samples.dt,
+                        unit=unit, label=f"residual after {','.join(fit.model.names)}",
+                        level=level)
+    return raw, resid

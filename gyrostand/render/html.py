@@ -74,8 +74,8 @@ def table(head: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1,
 
 
 def figure(plot: Plot) -> str:
-    """A figure: the PNG beside the page, its alt text, size and caption."""
-    return fill("figure.html", file=e(plot.file), alt=e(plot.alt), width=plot.size[0],
+    """A figure: the PNG beside the page (or embedded), its alt text, size and caption."""
+    return fill("figure.html", file=e(plot.src or plot.file), alt=e(plot.alt), width=plot.size[0],
                 height=plot.size[1], caption=e(plot.caption)).rstrip("\n")
 
 
@@ -185,7 +185,7 @@ def diagnosis(view: DiagnosisView) -> str:
     return page(f"gyrostand diagnosis: {model}", fill(
         "diagnosis.html", model=e(model), source=e(view.source), unit=e(rep.unit),
         verdict=verdict(rep), parameters=parameters(rep), model_error=model_error(rep),
-        segments=segments(rep), candidates=candidates(rep),
+        segments=segments(rep), candidates=candidates(rep), allan=allan_block(view.allan),
         warnings=warnings(rep.fit.warnings)))
 
 
@@ -216,7 +216,7 @@ def report_page(view: ReportPage) -> str:
     body = fill("report.html", gyro=e(subject.gyro), meta=meta,
                 verdict=verdict(rep) + "\n" + model_error(rep),
                 parameters=parameters(rep), segments=segments(rep),
-                candidates=candidates(rep), ledger=ledger,
+                candidates=candidates(rep), ledger=ledger, allan=allan_block(view.allan),
                 warnings=warnings(rep.fit.warnings),
                 **{f"fig_{k}": v for k, v in fig.items()})
     return page(f"gyrostand report: {subject.gyro} ({model})", body)
@@ -289,7 +289,8 @@ def fit_step(view: FitStepView) -> str:
         model_error=err, warnings=warnings(a.warnings)))
 
 
-def allan(view: AllanView) -> str:
+def _allan_slots(view: AllanView) -> dict[str, str]:
+    """The slots of ``allan.html`` and ``allan_block.html``: meta line, table, warnings."""
     t0 = view.raw
     meta = (f"{t0.n} samples at Δt = {view.dt:g} s of <code>{e(view.source)}</code>, "
             f"τ {t0.tau[0]:g}..{t0.tau[-1]:g} s; {t0.level:.0%} confidence intervals "
@@ -297,10 +298,21 @@ def allan(view: AllanView) -> str:
     rows = [[f"{e(t0.figures[n].symbol)} {e(_text.TITLES[n])}"]
             + ["<br>".join(e(x) for x in _text.allan_figure(t, n)) for t in view.tables]
             for n in _text.ORDER]
-    return page(f"gyrostand allan: {view.gyro}", fill(
-        "allan.html", gyro=e(view.gyro), meta=meta,
-        table=table(["figure", *[t.label for t in view.tables]], rows, left=3),
-        warnings=warnings([f"{t.label}: {w}" for t in view.tables for w in t.warnings])))
+    return {"gyro": e(view.gyro), "meta": meta,
+            "table": table(["figure", *[t.label for t in view.tables]], rows, left=3),
+            "warnings": warnings([f"{t.label}: {w}" for t in view.tables
+                                  for w in t.warnings])}
+
+
+def allan(view: AllanView) -> str:
+    return page(f"gyrostand allan: {view.gyro}", fill("allan.html", **_allan_slots(view)))
+
+
+def allan_block(view: AllanView | None) -> str:
+    """A diagnosis's Allan tables as a section of its page (empty when not computed)."""
+    if view is None:
+        return ""
+    return fill("allan_block.html", **_allan_slots(view)).rstrip("\n")
 
 
 # ---- the end of a run ---------------------------------------------------------------------

@@ -237,10 +237,12 @@ def allan(view: AllanView) -> str:
     out = [f"Allan variance (IEEE Std 952 figures), gyro {gyro}: {t0.n} samples at "
            f"Δt = {dt:g} s, τ {t0.tau[0]:g}..{t0.tau[-1]:g} s, "
            f"{t0.level:.0%} confidence intervals (overlapping ADEV, EDF)", ""]
-    width = 46
+    cells_of = {name: [allan_figure(t, name) for t in tables] for name in ORDER}
+    # a column as wide as its longest cell and 2 spaces (46 at least): cells never touch
+    width = max([46] + [len(x) + 2 for c in cells_of.values() for cell in c for x in cell])
     out.append(f"{'':<22}" + "".join(f"{t.label:<{width}}" for t in tables))
     for name in ORDER:
-        cells = [allan_figure(t, name) for t in tables]
+        cells = cells_of[name]
         sym = t0.figures[name].symbol
         for row in range(max(len(c) for c in cells)):
             head = f"{sym}  {TITLES[name]}" if row == 0 else ""
@@ -383,9 +385,15 @@ def run_report(view: RunReport) -> str:
 
 
 def _report_page(page: ReportPage) -> str:
-    """The report's diagnosis as text (``report --format text``)."""
+    """The report's diagnosis as text (``report --format text``), its Allan tables after."""
     s = page.subject
-    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})")
+    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})") + _allan_block(
+        page.allan)
+
+
+def _allan_block(view: AllanView | None) -> str:
+    """A diagnosis's Allan tables (:func:`allan`) after a blank line, when computed."""
+    return f"\n\n{allan(view)}" if view is not None else ""
 
 
 # ---- several runs of one gyro ---------------------------------------------------------
@@ -440,7 +448,8 @@ KINDS: dict[type, Callable[[Any], str]] = {
     FitResult: fit_result,
     JointFit: joint_fit,
     JointDiagnosis: joint_diagnosis,
-    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source), v),
+    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source)
+                                          + _allan_block(v.allan), v),
     FitStepView: lambda v: _with_ledger(fit_step(v), v),
     AllanView: allan,
     RunSummary: run_summary,

@@ -8,6 +8,7 @@ keys ``diagnose --json``, ``fit --json``, ``allan --json`` have always printed).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,9 +17,12 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from ..core.allan import AllanTable
     from ..core.candidates import Report
+    from ..core.results import FitResult
     from ..session.final import GyroFinal
     from ..session.pipeline import RunOutcome
     from ..workbench import FitStep, Subject
+
+log = logging.getLogger(__name__)
 
 __all__ = ["DiagnosisView", "FitStepView", "AllanView", "RunSummary", "RunReport",
            "ReportPage", "Plot"]
@@ -32,9 +36,10 @@ class DiagnosisView:
     report: Report
     source: str
     ledger: Path | None = None
+    allan: AllanView | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return self.report.to_dict()
+        return _with_allan(self.report.to_dict(), self.allan)
 
 
 @dataclass(frozen=True)
@@ -61,6 +66,28 @@ class AllanView:
     level: float
     raw: AllanTable
     residual: AllanTable
+
+    @classmethod
+    def of(cls, subject: Subject, fit: FitResult, unit: str,
+           level: float = 0.95) -> AllanView:
+        """The tables of ``subject``'s drift: raw, and the residual after ``fit``'s model
+        (:func:`gyrostand.core.allan.drift_tables`)."""
+        from ..core.allan import drift_tables
+
+        s = subject.samples
+        raw, resid = drift_tables(s, fit, unit=unit, level=level)
+        return cls(subject.gyro, s.source, unit, s.dt, tuple(fit.model.names), level, raw,
+                   resid)
+
+    @classmethod
+    def of_diagnosis(cls, subject: Subject, report: Report) -> AllanView | None:
+        """:meth:`of` the diagnosis's ML fit in its unit, or None (logged) where the data
+        are too short for an Allan table."""
+        try:
+            return cls.of(subject, report.fit, report.unit)
+        except ValueError as exc:
+            log.warning("no Allan tables: %s", exc)
+            return None
 
     @property
     def tables(self) -> list[AllanTable]:
@@ -112,12 +139,14 @@ class RunReport:
 
 @dataclass(frozen=True)
 class Plot:
-    """One figure of the report page: its PNG's file name, alt text, caption, pixel size."""
+    """One figure of the report page: its PNG's file name, alt text, caption, pixel size,
+    and ``src``: the image as a ``data:`` URI when embedded (else the page links ``file``)."""
 
     file: str
     alt: str
     caption: str
     size: tuple[int, int] = (0, 0)
+    src: str = ""
 
 
 @dataclass(frozen=True)
@@ -133,6 +162,13 @@ class ReportPage:
     conv_source: str
     written: str
     version: str
+    allan: AllanView | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return self.report.to_dict()
+        return _with_allan(self.report.to_dict(), self.allan)
+
+
+def _with_allan(doc: dict[str, Any], allan: AllanView | None) -> dict[str, Any]:
+    """A diagnosis's JSON with its Allan tables under ``"allan"`` (``{"raw": ...,
+    "residual": ..., "unit": ..., ...}``, as ``allan --json`` prints them), when computed."""
+    return {**doc, "allan": allan.to_dict()} if allan is not None else doc

@@ -7,14 +7,19 @@
         report.html               valid HTML5, inline CSS, no scripts, no network
         measured_vs_model.png     ... one PNG per figure, linked relatively
 
+With ``single_file`` (``report --single-file``) the folder holds ``report.html`` alone:
+each PNG is embedded in it as a ``data:image/png;base64,...`` URI, one file to mail.
+
 Every file is written to a temporary name and renamed into place, the page last, so a
 reader never sees a half-written file and the page never links to a missing image.
 """
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import datetime as _dt
+import io
 import logging
 import os
 import struct
@@ -25,11 +30,11 @@ from typing import IO, Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from .. import __version__
+from .. import __version__, progress
 from ..core.candidates import Report
 from ..core.model import context
 from ..render import render
-from ..render.views import Plot, ReportPage
+from ..render.views import AllanView, Plot, ReportPage
 from ..workbench import Subject, run_diagnose
 from . import figures
 from .series import convergence, ledger_points, ledger_steps
@@ -50,7 +55,8 @@ DOCUMENTS = {"text": "report.txt", "json": "report.json"}
 
 
 def write_report(subject: Subject, out_dir: str | Path | None = None, *,
-                 report: Report | None = None, format: str = "html") -> Path:
+                 report: Report | None = None, format: str = "html",
+                 single_file: bool = False) -> Path:
     """Write the report of ``subject``'s current model; return the path of the HTML page
     (or, with ``format`` ``"text"`` or ``"json"``, of the diagnosis as ``report.txt`` or
     ``report.json``, without figures).
@@ -61,16 +67,20 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
         report: an existing diagnosis of ``subject`` (default: diagnosed here, without
             writing a ledger step: a report only reads the ledger).
         format: ``"html"`` (default), ``"text"`` or ``"json"``.
+        single_file: the HTML page with its figures embedded (no PNG files beside it).
     """
     if format != "html" and format not in DOCUMENTS:
         raise ValueError(f"unknown report format {format!r}")
     out = Path(out_dir) if out_dir is not None else default_dir(subject)
     out.mkdir(parents=True, exist_ok=True)
-    rep = report if report is not None else run_diagnose(subject, record=False)
+    rep = (report if report is not None
+           else run_diagnose(subject, record=False, command="report"))
+    with progress.stage("report", "Allan tables"):
+        allan = AllanView.of_diagnosis(subject, rep)
     now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     if format != "html":
         doc = render(ReportPage(subject, rep, (), ledger_steps(subject), "", now,
-                                __version__), format)
+                                __version__, allan), format)
         path = out / DOCUMENTS[format]
         _atomic(path, lambda fh: fh.write(doc.encode("utf-8")))
         return path
@@ -80,7 +90,8 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     lin = rep.model.names_of_kind("linear")
     X = rep.model.regressors(p, ctx)
     det = X @ np.array([p[k] for k in lin]) if lin else np.zeros(len(s))
-    conv, conv_source = convergence(subject, rep)
+    with progress.stage("report", "estimates over time"):
+        conv, conv_source = convergence(subject, rep)
     steps = ledger_steps(subject)
     points = ledger_points(steps, rep, s)
 
@@ -142,12 +153,22 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
          lambda: figures.allan(rep, s.dt)),
     ]
     drawn = []
-    for plot, make in plots:
-        fig = make()
-        _atomic(out / plot.file, _png(fig))
-        drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
-    page = render(ReportPage(subject, rep, drawn, steps, conv_source, now, __version__),
-                  "html")
+    with progress.stage("report", "figures", total=len(plots), unit="figures") as bar:
+        for plot, make in plots:
+            fig = make()
+            if single_file:
+                buf = io.BytesIO()
+                _png(fig)(buf)
+                png = buf.getvalue()
+                drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
+                    "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
+                (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
+            else:
+                _atomic(out / plot.file, _png(fig))
+                drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
+            bar.update()
+    page = render(ReportPage(subject, rep, drawn, steps, conv_source, now, __version__,
+                             allan), "html")
     path = out / PAGE
     _atomic(path, lambda fh: fh.write(page.encode("utf-8")))
     log.info("report written to %s", path)
@@ -172,10 +193,15 @@ def _atomic(path: Path, write: Callable[[IO[bytes]], Any]) -> None:
 
 
 def png_size(path: Path) -> tuple[int, int]:
-    """Width and height of a PNG from its IHDR chunk."""
+    """Width and height of a PNG file from its IHDR chunk."""
     with path.open("rb") as fh:
         head = fh.read(24)
-    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        raise ValueError(f"{path}: not a PNG file")
-    w, h = struct.unpack(">II", head[16:24])
+    return png_header_size(head, str(path))
+
+
+def png_header_size(data: bytes, name: str = "image") -> tuple[int, int]:
+    """Width and height of the PNG whose bytes start with ``data`` (its IHDR chunk)."""
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        raise ValueError(f"{name}: not a PNG file")
+    w, h = struct.unpack(">II", data[16:24])
     return int(w), int(h)

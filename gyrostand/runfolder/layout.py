@@ -6,6 +6,9 @@
         raw.blf, raw-2.blf, ...  the raw log, one file per segment (RAW_LOG, raw_segments)
         <gyro>/samples.csv       1-s bins (SAMPLES)
         <gyro>/estimates.csv     online estimates after every bin (ESTIMATES)
+        <gyro>/samples.parquet,  the same tables as Parquet, written at the run's end with
+        <gyro>/estimates.parquet   session.formats: [parquet] or --data-format parquet
+        <run folder name>.mf4    the run as MDF4, at the end with formats: [mf4]
         result.json              final fits and counts (RESULT)
         segments.json            each raw segment's counts (SEGMENTS_FILE)
         report.txt               the final table (REPORT)
@@ -31,7 +34,7 @@ from ..errors import OutputError
 __all__ = ["SAMPLES", "ESTIMATES", "RESULT", "REPORT", "SNAPSHOT", "SEGMENTS_FILE",
            "LEDGER", "RUN_LOG", "LOCK", "RAW_LOG", "samples_path", "estimates_path",
            "csv_ledger_path", "make_run_dir", "latest_run_dir", "raw_segments",
-           "next_raw_segment", "check_writable", "RunLock"]
+           "next_raw_segment", "check_writable", "RunLock", "DATA_FORMATS"]
 
 SAMPLES = "samples.csv"
 ESTIMATES = "estimates.csv"
@@ -43,6 +46,10 @@ LEDGER = "ledger.jsonl"
 RUN_LOG = "run.log"
 LOCK = ".lock"
 RAW_LOG = "raw.blf"
+#: the formats a run also writes its samples and estimates in, beside the CSVs (which are
+#: always written), at its end (``session.formats``, ``--data-format``), each with the
+#: package it needs (:mod:`gyrostand.session.export` writes them)
+DATA_FORMATS = {"parquet": "pyarrow", "mf4": "asammdf"}
 
 
 def samples_path(run_dir: str | Path, gyro: str) -> Path:

@@ -45,7 +45,8 @@ from ..runfolder import (
     samples_path,
 )
 
-__all__ = ["ExportError", "RunTables", "read_run_tables", "export_parquet", "export_mf4"]
+__all__ = ["ExportError", "RunTables", "read_run_tables", "export_parquet", "export_mf4",
+           "write_formats"]
 
 log = logging.getLogger(__name__)
 
@@ -216,3 +217,25 @@ def export_mf4(run_dir: str | Path, out: str | Path | None = None,
     finally:
         mdf.close()
     return path
+
+
+def write_formats(run_dir: str | Path, formats: Sequence[str]) -> list[Path]:
+    """The run's end (``session.formats``, ``--data-format``): each of ``formats``
+    (:data:`~gyrostand.runfolder.layout.DATA_FORMATS`) written into the run folder from
+    its committed CSVs and ``result.json`` by :func:`export_parquet` / :func:`export_mf4`;
+    the CSVs are only read. Any failure is an :class:`OutputError` naming the format."""
+    written: list[Path] = []
+    for fmt in formats:
+        try:
+            if fmt == "parquet":
+                written += export_parquet(run_dir)
+            elif fmt == "mf4":
+                written.append(export_mf4(run_dir))
+            else:
+                raise DataError(f"unknown data format {fmt!r}")
+        except OutputError:
+            raise
+        except GyrostandError as exc:  # no package, unreadable CSV: the file is not written
+            raise OutputError(f"{run_dir}: {fmt} not written: {exc}") from exc
+        log.info("%s: %s written", run_dir, fmt)
+    return written

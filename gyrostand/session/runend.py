@@ -93,6 +93,10 @@ def finish_run(pipe: Pipeline, reason: str, *, extra_stats: dict[str, Any] | Non
                                       finals, stats))
     attempt(lambda: write_report(report, pipe.cfg, pipe.source, finals, stats,
                                  truths or {}))
+    if pipe.cfg.formats:  # Parquet/MF4 beside the CSVs, from the files as committed
+        from .export import write_formats
+
+        attempt(lambda: write_formats(pipe.run_dir, pipe.cfg.formats))
     if unwritten and state != FAULT:
         state, reason = FAULT, f"{reason}; {unwritten[0]}"
         stats["stop_reason"] = reason

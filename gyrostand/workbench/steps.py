@@ -41,9 +41,15 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def run_diagnose(subject: Subject, *, record: bool = True) -> Report:
-    """Diagnose the subject's current model; append the step to the ledger."""
-    rep = diagnose(subject.samples, subject.model, unit=subject.unit)
+def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagnose") -> Report:
+    """Diagnose the subject's current model; append the step to the ledger. Its stages
+    show as ``command``'s progress (:mod:`gyrostand.progress`, on in the CLI only)."""
+    from .. import progress
+
+    with progress.stage(command, "ML fit of the current model"):
+        fit = ml(subject.samples, subject.model)
+    with progress.stage(command, "candidates, residual tests, model-error floor"):
+        rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit)
     if record:
         err = rep.model_error
         try:

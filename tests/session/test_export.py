@@ -111,3 +111,89 @@ def test_errors(run_dir, tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed
     with pytest.raises(ExportError, match=r"pip install 'gyrostand\[formats\]'"):
         export_parquet(run_dir, tmp_path)
+
+
+# ---- the run itself writes them (session.formats, --data-format) -----------------------
+
+def _fixture_files(run_dir):
+    """The fixture's session file and simulated log (beside its runs/ folder)."""
+    top = run_dir.parents[1]
+    return top / "s.yaml", top / "sim.blf"
+
+
+def test_replay_with_data_format_parquet_writes_it_beside_identical_csvs(run_dir, tmp_path,
+                                                                          capsys):
+    cfg, log = _fixture_files(run_dir)
+    assert main(["replay", str(cfg), str(log), "--out", str(tmp_path),
+                 "--data-format", "parquet"]) == 0
+    capsys.readouterr()
+    (new,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    for name in ("samples.csv", "estimates.csv"):  # the CSVs as without the option
+        assert (new / "az" / name).read_bytes() == (run_dir / "az" / name).read_bytes(), name
+    samples = pq.read_table(new / "az" / "samples.parquet")
+    csv = read_samples_csv(new / "az" / "samples.csv")
+    assert samples.num_rows == len(csv["t"]) == 401
+    for k in SAMPLES_COLUMNS:
+        want = np.asarray(csv[k], dtype=np.int64 if k.startswith("n_") else float)
+        assert _same(samples.column(k).to_numpy(), want), k
+    est = pq.read_table(new / "az" / "estimates.parquet")
+    cols = read_estimates_csv(new / "az" / "estimates.csv")
+    assert est.column_names == list(cols)
+    for k, v in cols.items():
+        got = est.column(k).to_pylist() if k.endswith(":status") else est.column(k).to_numpy()
+        if k.endswith(":status"):
+            assert got == list(v), k
+        else:
+            assert _same(np.asarray(got), np.asarray(v, dtype=float)), k
+    assert not (new / f"{new.name}.mf4").exists()  # only what was asked for
+
+
+def test_session_formats_key_writes_parquet_and_mf4(run_dir, tmp_path):
+    import yaml
+
+    cfg_path, log = _fixture_files(run_dir)
+    d = yaml.safe_load(cfg_path.read_text())
+    d["session"]["formats"] = ["parquet", "mf4"]
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(d))
+    cfg = load_config(path)
+    assert cfg.formats == ("parquet", "mf4")
+    out = run_replay(cfg, log, out=tmp_path / "runs")
+    assert out.ok and not out.stats["unwritten"]
+    assert (out.run_dir / "az" / "samples.parquet").is_file()
+    assert (out.run_dir / "az" / "estimates.parquet").is_file()
+    with asammdf.MDF(out.run_dir / f"{out.run_dir.name}.mf4") as mdf:
+        drift = mdf.get("az.drift")
+    csv = read_samples_csv(out.run_dir / "az" / "samples.csv")
+    assert np.array_equal(drift.samples, np.asarray(csv["drift"], dtype=float), equal_nan=True)
+
+
+def test_bad_formats_are_config_errors_naming_the_key(run_dir, tmp_path, monkeypatch,
+                                                       capsys):
+    import yaml
+
+    from gyrostand.errors import ConfigError
+
+    cfg_path, _ = _fixture_files(run_dir)
+    d = yaml.safe_load(cfg_path.read_text())
+    d["session"]["formats"] = ["parquet", "csv"]
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(d))
+    with pytest.raises(ConfigError, match=r"session\.formats\[1\]: 'csv' is not one of: "
+                                          r"parquet, mf4"):
+        load_config(path)
+    # a package that is not installed: said when the session is loaded, not at the run's end
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "pyarrow" else real(name, *a))
+    d["session"]["formats"] = ["parquet"]
+    path.write_text(yaml.safe_dump(d))
+    with pytest.raises(ConfigError, match=r"session\.formats: parquet needs the pyarrow "
+                                          r"package .*gyrostand\[formats\]"):
+        load_config(path)
+    capsys.readouterr()
+    assert main(["replay", str(cfg_path), str(tmp_path / "none.blf"), "--data-format",
+                 "parquet"]) == 2
+    assert "error: --data-format: parquet needs the pyarrow package" in capsys.readouterr().err

@@ -91,3 +91,43 @@ def test_nothing_from_library_use(replay_args, capsys):
     run_replay(cfg, Path(replay_args[2]), out=Path(replay_args[4]))
     err = capsys.readouterr().err
     assert "replay: stream" not in err
+
+
+# ---- diagnose and report: their stages (ML fit, candidates and floor, Allan tables,
+# estimates over time, figures), from the workbench, not from the numerical core ---------
+
+WORKBENCH_LINE = re.compile(
+    r"^(diagnose|report): (ML fit of the current model|candidates, residual tests, "
+    r"model-error floor|Allan tables|estimates over time|figures: 7 figures):? in [\d.]+ s$",
+    re.M)
+
+
+@pytest.fixture(scope="module")
+def chamber_csv(tmp_path_factory):
+    from tests.report.conftest import chamber_samples
+
+    path = tmp_path_factory.mktemp("progress_wb") / "chamber.csv"
+    chamber_samples(hours=0.5, seed=5).to_csv(path)
+    return path
+
+
+def test_diagnose_shows_its_stages_as_bars_on_a_terminal(chamber_csv):
+    out = _on_pty(["diagnose", str(chamber_csv), "--unit", "deg/h"]).replace("\r\n", "\n")
+    assert "diagnose: candidates, residual tests, model-error floor" in out
+    assert "\r" in out  # tqdm redraws in place
+    assert not WORKBENCH_LINE.search(out), out[-2000:]
+    assert "verdict" in out and "Allan variance" in out  # the result itself, on stdout
+
+
+def test_report_stage_lines_in_a_pipe_and_none_on_stdout(chamber_csv, tmp_path):
+    p = subprocess.run([sys.executable, "-m", "gyrostand", "report", str(chamber_csv),
+                        "--single-file", "--out", str(tmp_path / "rep")],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    names = [m.group(2) for m in WORKBENCH_LINE.finditer(p.stderr)]
+    assert names == ["ML fit of the current model",
+                     "candidates, residual tests, model-error floor", "Allan tables",
+                     "estimates over time", "figures: 7 figures"], p.stderr
+    assert all(m.group(1) == "report" for m in WORKBENCH_LINE.finditer(p.stderr))
+    assert "\r" not in p.stderr
+    assert p.stdout.strip() == str(tmp_path / "rep" / "report.html")  # stdout: the path only
