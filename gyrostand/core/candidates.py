@@ -27,13 +27,17 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import DataError, GyrostandError
+from .chisq import chi2_sf
 from .data import Samples
 from .diagnostics import Diagnosis, diagnose_fit, segments
 from .ml import ml
@@ -48,6 +52,8 @@ log = logging.getLogger(__name__)
 
 #: fewest observed samples a diagnosis judges (Ljung–Box lags, candidate refits)
 MIN_DIAGNOSE_SAMPLES = 30
+#: most threads the candidate refits run on (at most one per CPU this process may use)
+MAX_THREADS = 4
 #: ln L rise that shows the current fit was not at its maximum
 REFIT_GAIN = 0.05
 #: the test's null hypothesis and the look-alikes are facts of each term
@@ -212,19 +218,54 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
     return ok, bound
 
 
+def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
+            ) -> list[tuple[FitResult | None, GyrostandError | None, float]]:
+    """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
+    that stopped it, seconds it took), in the order of ``terms``.
+
+    The refits are independent, so they run on a thread per CPU (at most
+    :data:`MAX_THREADS`): most of their time is in the compiled Kalman filter, which
+    releases the GIL (``nogil``), so the threads run on the cores side by side (the same
+    CPU time in all; wall clock ~1/CPUs of it on an idle machine). Each fit is the same
+    deterministic computation whichever thread runs it: the results do not depend on the
+    number of threads. BLAS is held to one thread around the pool (the algebra is on
+    tiny matrices; see :func:`~gyrostand.core.ml.ml`).
+    """
+    def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float]:
+        t0 = time.perf_counter()
+        try:
+            return refit(samples, model.add(term), base), None, time.perf_counter() - t0
+        except GyrostandError as exc:
+            return None, exc, time.perf_counter() - t0
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = min(len(terms), cpus or 1, MAX_THREADS)
+    if workers <= 1:
+        return [one(t) for t in terms]
+    # the costliest first (more nonlinear parameters to search: a longer fit), so that the
+    # threads finish together
+    def searched(term: str) -> int:
+        bigger = model.add(term)
+        return sum(1 for k in bigger.param_names if k not in model.param_names
+                   and bigger.kind(k) in ("rate", "time", "std"))
+
+    order = sorted(range(len(terms)), key=lambda i: -searched(terms[i]))
+    with threadpool_limits(limits=1, user_api="blas"), \
+            ThreadPoolExecutor(max_workers=workers, thread_name_prefix="refit") as pool:
+        futures = {i: pool.submit(one, terms[i]) for i in order}
+        return [futures[i].result() for i in range(len(terms))]
+
+
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
                     terms: list[str] | None = None) -> list[Candidate]:
     """Refit ``model + c`` for each candidate ``c``; ranked best first (ΔBIC, then p)."""
-    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
-
     n = base.n_observed
     out = []
-    for term in terms if terms is not None else candidate_terms(model):
-        t0 = time.perf_counter()
+    todo = list(terms if terms is not None else candidate_terms(model))
+    for term, (r, exc, seconds) in zip(todo, _refits(samples, model, base, todo),
+                                       strict=True):
         bigger = model.add(term)
-        try:
-            r = refit(samples, bigger, base)
-        except GyrostandError as exc:
+        if r is None:
             log.warning("candidate %s could not be fitted: %s", term, exc)
             continue
         assert base.loglik is not None and r.loglik is not None
@@ -232,7 +273,7 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
         added = len(r.parameters) - len(base.parameters)
         df = added + _extra_df(term)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
-        p = float(chi2.sf(lr, df))
+        p = chi2_sf(lr, df)
         if _halved(term):
             p *= 0.5
         new = [k for k in r.parameters if k not in base.parameters]
@@ -250,7 +291,7 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             term=term, lr_stat=lr, df=df, p_value=p, delta_aic=-lr + 2 * added,
             delta_bic=-lr + added * float(np.log(n)), rms_after=r.residual_rms,
             loglik_after=float(r.loglik), effect={k: r.parameters[k] for k in new},
-            seconds=time.perf_counter() - t0, result=r, identified=ident, at_bound=bound,
+            seconds=seconds, result=r, identified=ident, at_bound=bound,
             stochastic=stochastic, note=note,
         ))
     out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
@@ -309,7 +350,7 @@ COMPETITORS_TRIED = 3
 
 
 def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
-                            alpha_each: float, chi2: Any) -> bool:
+                            alpha_each: float) -> bool:
     """Whether the stochastic candidate ``st`` explains the failure and the deterministic
     ``d`` does not once ``st`` is in the model: both fitted together, each tested given the
     other."""
@@ -325,8 +366,8 @@ def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Ca
     df_s = len(both.param_names) - len(model.add(d.term).param_names)
     lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
     lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
-    p_d = float(chi2.sf(lr_d, df_d + _extra_df(d.term)))
-    p_s = float(chi2.sf(lr_s, df_s + _extra_df(st.term)))
+    p_d = chi2_sf(lr_d, df_d + _extra_df(d.term))
+    p_s = chi2_sf(lr_s, df_s + _extra_df(st.term))
     if _halved(st.term):
         p_s *= 0.5
     log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
@@ -345,8 +386,6 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     Either way the table says they compete; the other is tested again after the first is
     added.
     """
-    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
-
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     det = [c for c in sig if not c.stochastic]
     sto = [c for c in sig if c.stochastic]
@@ -356,7 +395,7 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     # the deterministic candidates in their order, until one survives the stochastic one
     # (a flexible effect, e.g. a lagged rate, may lose to it where the true one would not)
     for d in det[:COMPETITORS_TRIED]:
-        if not _random_explains_better(samples, model, d, st, alpha_each, chi2):
+        if not _random_explains_better(samples, model, d, st, alpha_each):
             first = d
             break
     else:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .chisq import chi2_ppf, chi2_sf
 from .data import Samples
 from .kalman import kf_run, kf_smooth
 from .model import Model, context
@@ -38,8 +39,6 @@ def ljung_box(z: np.ndarray, lags: int) -> tuple[float, float]:
 
     Q = n(n+2) Σ_{k=1..h} ρ_k² / (n − k),  Q ~ χ²(h) for white noise.
     """
-    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import
-
     z = z[np.isfinite(z)]
     n = z.size
     z = z - z.mean()
@@ -48,7 +47,7 @@ def ljung_box(z: np.ndarray, lags: int) -> tuple[float, float]:
         return 0.0, 1.0
     rho = np.array([float(z[k:] @ z[:-k]) / d for k in range(1, lags + 1)])
     q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
-    return q, float(chi2.sf(q, lags))
+    return q, chi2_sf(q, lags)
 
 
 def autocorrelation(z: np.ndarray, lags: int) -> np.ndarray:
@@ -185,9 +184,7 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
         lags = int(min(max(10, np.log(max(n, 2))), max(1, n // 5)))
     q, pval = ljung_box(z, lags)
     nis = float(np.nanmean(z * z))
-    from scipy.stats import chi2
-
-    band = (float(chi2.ppf(0.025, n) / n), float(chi2.ppf(0.975, n) / n))
+    band = (chi2_ppf(0.025, n) / n, chi2_ppf(0.975, n) / n)
     # smoothed residuals: y − deterministic part − smoothed stochastic part
     X = model.regressors(p, ctx)
     theta = np.array([p[k] for k in model.names_of_kind("linear")])

@@ -50,6 +50,13 @@ def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
       else empty arrays (the likelihood needs no (N, m) array);
     * ``G = sum_k e_k e_k' / f_k`` (m, m), ``slogf = sum_k ln f_k`` and ``nobs`` over
       the observed samples (``slogf = -inf`` if some ``f_k <= 0``).
+
+    Steady state, exactly: the covariance recursion P_{k+1|k} = F (I − K_k H) P_{k|k−1} ...
+    is a fixed function of P_{k|k−1} and R_k. Once two consecutive observed samples with
+    the same R start from bit-identical P_{k|k−1}, every following one (until a missing
+    sample or another R) does too, so its f, ln f and K are the previous ones: they are
+    reused instead of recomputed (the same floating-point numbers; on a 6-h run the
+    Riccati recursion reaches its fixed point within a few hundred samples).
     """
     n = phi.shape[0]
     N, m = Y.shape
@@ -68,29 +75,50 @@ def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     K = np.empty(n)
     A = np.empty((n, n))
     AH = np.empty(n)
+    P_last = np.empty((n, n))  # P_{k|k-1} of the last observed sample
+    r_last = np.nan            # ... and its R (NaN: the last sample was not observed)
+    steady = False
+    f = 0.0
+    logf = 0.0
     weighted = rw.shape[0] == N
     for k in range(N):
         if np.isnan(Y[k, 0]):
+            steady = False
+            r_last = np.nan
             if store:
                 E[k, :] = np.nan
                 f_out[k] = np.nan
         else:
             rk = r * rw[k] if weighted else r
-            # f = H P H' + R_k, with H = [1, ..., 1]
-            f = rk
-            for i in range(n):
-                s = 0.0
-                for j in range(n):
-                    s += P[i, j]
-                PH[i] = s
-                f += s
-            if f <= 0.0:
-                return E, f_out, G, -np.inf, nobs
-            slogf += np.log(f)
+            if steady and rk != r_last:
+                steady = False
+            if not steady:
+                f_last = f
+                # f = H P H' + R_k, with H = [1, ..., 1]
+                f = rk
+                for i in range(n):
+                    s = 0.0
+                    for j in range(n):
+                        s += P[i, j]
+                    PH[i] = s
+                    f += s
+                if f <= 0.0:
+                    return E, f_out, G, -np.inf, nobs
+                logf = np.log(f)
+                # K = P H' / f
+                for i in range(n):
+                    K[i] = PH[i] / f
+                # (P compared only once f repeats: the cheap test first)
+                same = rk == r_last and f == f_last
+                for i in range(n):
+                    for j in range(n):
+                        if same and P[i, j] != P_last[i, j]:
+                            same = False
+                        P_last[i, j] = P[i, j]
+                r_last = rk
+                steady = same
+            slogf += logf
             nobs += 1
-            # K = P H' / f
-            for i in range(n):
-                K[i] = PH[i] / f
             # e = y - H x ;  x = x + K e
             for c in range(m):
                 hx = 0.0
@@ -107,24 +135,27 @@ def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
             for a in range(m):
                 for c in range(a, m):
                     G[a, c] += e_row[a] * e_row[c] / f
-            # Joseph form: P = (I - K H) P (I - K H)' + K R K'
-            # (I - K H) P = P - K (H P);  then right-multiply by (I - K H)'
-            for i in range(n):
-                for j in range(n):
-                    A[i, j] = P[i, j] - K[i] * PH[j]
-            for i in range(n):
-                s = 0.0
-                for j in range(n):
-                    s += A[i, j]
-                AH[i] = s
-            _joseph_finish(P, A, AH, K, rk)
-        # predict: x = F x ; P = F P F' + Q  (F, Q diagonal)
+            if not steady:
+                # Joseph form: P = (I - K H) P (I - K H)' + K R K'
+                # (I - K H) P = P - K (H P);  then right-multiply by (I - K H)'
+                for i in range(n):
+                    for j in range(n):
+                        A[i, j] = P[i, j] - K[i] * PH[j]
+                for i in range(n):
+                    s = 0.0
+                    for j in range(n):
+                        s += A[i, j]
+                    AH[i] = s
+                _joseph_finish(P, A, AH, K, rk)
+        # predict: x = F x ; P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
         for i in range(n):
             for c in range(m):
                 X[i, c] *= phi[i]
-            for j in range(n):
-                P[i, j] *= phi[i] * phi[j]
-            P[i, i] += q[i]
+        if not steady:
+            for i in range(n):
+                for j in range(n):
+                    P[i, j] *= phi[i] * phi[j]
+                P[i, i] += q[i]
     for a in range(m):
         for c in range(a):
             G[a, c] = G[c, a]

@@ -23,7 +23,10 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Mapping
+import os
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -61,6 +64,39 @@ TIME_MIN_STEPS = 3.0
 TIME_MAX_RECORDS = 1.0
 #: points of the scan over a nonlinear parameter new to a refit (see ml_fit's ``start``)
 SCAN_POINTS = 13
+#: most threads one fit evaluates its likelihood on (see :func:`_evaluator`)
+MAX_THREADS = 4
+
+
+class _Evaluator:
+    """Values of a function at several points, in order: on a thread pool when this fit
+    runs in the main thread of a process with several CPUs, else one after the other.
+
+    The points of a finite-difference gradient, of a Hessian and of the start grid are
+    independent, and an evaluation's time is mostly the compiled Kalman filter, which
+    releases the GIL: on 2 CPUs two of them run side by side. Each value is the same
+    computation whichever thread makes it, so the fit is the same number for number.
+    Inside a worker thread (diagnose's candidate refits, one thread per CPU already) the
+    evaluations stay sequential.
+    """
+
+    def __init__(self) -> None:
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else (os.cpu_count() or 1)
+        main = threading.current_thread() is threading.main_thread()
+        workers = min(cpus, MAX_THREADS) if main else 1
+        self.pool = ThreadPoolExecutor(workers, thread_name_prefix="ml") if workers > 1 \
+            else None
+
+    def __call__(self, fun: Callable[[np.ndarray], float],
+                 points: Sequence[np.ndarray]) -> list[float]:
+        if self.pool is None or len(points) < 2:
+            return [fun(z) for z in points]
+        return list(self.pool.map(fun, points))
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
 
 
 def time_bounds(dt: float, duration: float) -> tuple[float, float]:
@@ -119,6 +155,7 @@ class _Problem:
         self.bounds = list(zip(lo, hi, strict=True))
         self.n_obs = samples.n_observed
         self.nevals = 0
+        self._count = threading.Lock()  # profile() may run on several threads at once
 
     def kind(self, name: str) -> str:
         """The kind of a searched parameter (``rate``, ``time``, ``std``)."""
@@ -147,7 +184,8 @@ class _Problem:
 
     def profile(self, z: np.ndarray):
         """Concentrated ln L at ``z``; also θ̂, scale s² and the GLS information."""
-        self.nevals += 1
+        with self._count:
+            self.nevals += 1
         p = self.unpack(z)
         G, slogf, n = self.gram(p)
         if not np.isfinite(slogf):
@@ -287,11 +325,20 @@ def _starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
     return out
 
 
-def _optimise(prob, starts: list[np.ndarray], n_local: int | None
+def _sequential(fun: Callable[[np.ndarray], float],
+                points: Sequence[np.ndarray]) -> list[float]:
+    return [fun(z) for z in points]
+
+
+def _optimise(prob, starts: list[np.ndarray], n_local: int | None,
+              evaluate: Callable[[Callable[[np.ndarray], float], Sequence[np.ndarray]],
+                                 list[float]] = _sequential
               ) -> tuple[np.ndarray, dict[str, Any], list[str]]:
     """Maximise the concentrated ln L of ``prob`` (a :class:`_Problem`, or the joint
     problem of several runs, :mod:`~gyrostand.core.multirun`) by L-BFGS-B from the best of
-    ``starts``: the searched point ``z``, the search's info and its warnings."""
+    ``starts``: the searched point ``z``, the search's info and its warnings. ``evaluate``
+    gives the objective at several points (the start grid, a gradient's points): an
+    :class:`_Evaluator`'s thread pool, or one after the other."""
     warnings: list[str] = []
 
     def obj(z: np.ndarray) -> float:
@@ -305,15 +352,19 @@ def _optimise(prob, starts: list[np.ndarray], n_local: int | None
     def grad(z: np.ndarray) -> np.ndarray:
         # central differences in the log parameters (one-sided at a bound)
         g = np.empty(z.size)
+        pts = []
         for i in range(z.size):
             up, dn = z.copy(), z.copy()
             up[i] = min(z[i] + GRAD_STEP, hi[i])
             dn[i] = max(z[i] - GRAD_STEP, lo[i])
-            g[i] = (obj(up) - obj(dn)) / (up[i] - dn[i])
+            pts += [up, dn]
+        vals = evaluate(obj, pts)
+        for i in range(z.size):
+            g[i] = (vals[2 * i] - vals[2 * i + 1]) / (pts[2 * i][i] - pts[2 * i + 1][i])
         return g
 
     if prob.znames:
-        vals = [obj(z) for z in starts]
+        vals = evaluate(obj, starts)
         order = np.argsort(vals)
         if n_local is None:
             n_local = 2 if len(prob.rates) <= 1 else 5
@@ -381,6 +432,19 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         hessian_passes: numerical Hessians behind them (the second with steps set from
             the first pass's stds; one pass is enough to judge identification).
     """
+    evaluate = _Evaluator()
+    try:
+        return _ml_fit(samples, model, evaluate, sigma, fixed, n_local, start, std_errors,
+                       hessian_passes)
+    finally:
+        evaluate.close()
+
+
+def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float | None,
+            fixed: Mapping[str, float] | None, n_local: int | None,
+            start: Mapping[str, float] | None, std_errors: bool,
+            hessian_passes: int) -> FitResult:
+    """:func:`ml_fit`, its likelihood evaluated by ``evaluate``."""
     fixed = dict(fixed or {})
     if sigma is not None:
         fixed["markov.sigma"] = float(sigma)
@@ -393,7 +457,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
     if start:
         starts += _starts_from(prob, starts, start)
-    z, info, more = _optimise(prob, starts, n_local)
+    z, info, more = _optimise(prob, starts, n_local, evaluate)
     warnings += more
     at_bound = info.get("at_bound", [])
     p, gls_info, ll_prof = prob.natural(z)
@@ -405,7 +469,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     std = dict.fromkeys(free, 0.0)
     if std_errors and free:
         cov, cw = observed_covariance(model, samples, p, free, gls_info, prob,
-                                       at_bound, hessian_passes)
+                                       at_bound, hessian_passes, evaluate)
         warnings += cw
         std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
     params = {}

@@ -16,25 +16,38 @@ if TYPE_CHECKING:
     from .multirun import _JointProblem
 
 
-def hessian(fun, x: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Central-difference Hessian of ``fun`` at ``x`` with steps ``h``."""
+def hessian(fun, x: np.ndarray, h: np.ndarray, evaluate=None) -> np.ndarray:
+    """Central-difference Hessian of ``fun`` at ``x`` with steps ``h``.
+
+    ``evaluate(fun, points)`` → values, in order (default: one after the other; the ML fit
+    passes a thread pool's map — the same values whichever way they are computed):
+
+        H_ii = (f(x + h_i) − 2 f(x) + f(x − h_i)) / h_i²
+        H_ij = (f(x + h_i + h_j) − f(x + h_i − h_j) − f(x − h_i + h_j) + f(x − h_i − h_j))
+               / (4 h_i h_j)
+    """
     n = x.size
     H = np.empty((n, n))
-    f0 = fun(x)
-    fp = np.empty(n)
-    fm = np.empty(n)
+    pts = [x]
     for i in range(n):
         e = np.zeros(n)
         e[i] = h[i]
-        fp[i], fm[i] = fun(x + e), fun(x - e)
-        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h[i] ** 2
+        pts += [x + e, x - e]
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    for i, j in pairs:
+        ei = np.zeros(n)
+        ej = np.zeros(n)
+        ei[i], ej[j] = h[i], h[j]
+        pts += [x + ei + ej, x + ei - ej, x - ei + ej, x - ei - ej]
+    vals = evaluate(fun, pts) if evaluate is not None else [fun(q) for q in pts]
+    f0 = vals[0]
     for i in range(n):
-        for j in range(i + 1, n):
-            ei = np.zeros(n)
-            ej = np.zeros(n)
-            ei[i], ej[j] = h[i], h[j]
-            v = (fun(x + ei + ej) - fun(x + ei - ej) - fun(x - ei + ej) + fun(x - ei - ej))
-            H[i, j] = H[j, i] = v / (4 * h[i] * h[j])
+        fp, fm = vals[1 + 2 * i], vals[2 + 2 * i]
+        H[i, i] = (fp - 2 * f0 + fm) / h[i] ** 2
+    for k, (i, j) in enumerate(pairs):
+        a, b, c, d = vals[1 + 2 * n + 4 * k: 5 + 2 * n + 4 * k]
+        v = (a - b - c + d)
+        H[i, j] = H[j, i] = v / (4 * h[i] * h[j])
     return H
 
 
@@ -66,12 +79,12 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
 def observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
                          gls_info: np.ndarray, prob: _Problem | _JointProblem,
                          at_bound: list[str],
-                         passes: int = 2):
+                         passes: int = 2, evaluate=None):
     """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
 
     A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
     maximum: the others' covariance is then taken with it held at its estimate, and its
-    own std is the inverse curvature along it alone.
+    own std is the inverse curvature along it alone. ``evaluate`` as :func:`hessian`.
     """
     x0 = np.array([p[n] for n in free])
     noise_scale = max(p[n] for n in model.names_of_kind("std"))
@@ -109,7 +122,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
     for _ in range(max(1, passes)):
-        H = hessian(ll, x0, h)
+        H = hessian(ll, x0, h, evaluate)
         if not np.all(np.isfinite(H)):
             H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)
         inner = [i for i, n in enumerate(free) if n not in at_bound]

@@ -31,10 +31,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .data import Samples
-from .kalman import kf_filtered_states
+from .kalman import first_order_response, kf_filtered_states
 from .model import Model, context
 
 #: window lengths of the means (s)
@@ -141,7 +140,9 @@ def _replicates(model: Model, p: Mapping[str, float], samples: Samples, ok: np.n
         for i in range(phi.size):
             e = rng.standard_normal(N) * np.sqrt(q[i])
             e[0] = rng.standard_normal() * np.sqrt(p0[i])
-            s = s + lfilter([1.0], [1.0, -phi[i]], e)
+            # x_0 = e_0, x_k = φ x_{k−1} + e_k (the Gauss–Markov state; scipy.signal's
+            # lfilter([1], [1, −φ]) gives the same numbers, at 0.9 s of import)
+            s = s + first_order_response(e, float(phi[i]), 0.0, 1.0, float(e[0]))
         s = np.where(ok, s, np.nan)
         preds = _predictions(s, zero, model, p, samples, steps)
         for h in steps:
