@@ -160,11 +160,12 @@ def _whittle(S0: np.ndarray, fit: Model, params: Mapping[str, float], w: np.ndar
 
 def divergence(truth: Model, truth_params: Mapping[str, float], fit: Model,
                fit_params: Mapping[str, float], t: np.ndarray, temp: np.ndarray, dt: float,
-               *, refit_noise: bool = True) -> float:
+               *, refit_noise: bool = True, found: dict[str, float] | None = None) -> float:
     """Λ(truth→fit) on the record (``t``, ``temp``): min over ``fit``'s linear
     coefficients (least squares), its mean parameters (:func:`mean_parameters`) and, with
     ``refit_noise``, its noise levels (``std``), of the whitened squared distance plus the
-    noises' Whittle divergence (module docstring)."""
+    noises' Whittle divergence (module docstring). ``found``: filled with the re-fitted
+    nonlinear parameters (a warm start for the next, similar record)."""
     from scipy.optimize import minimize
 
     s = _samples(t, np.zeros_like(t), temp, dt)
@@ -197,7 +198,10 @@ def divergence(truth: Model, truth_params: Mapping[str, float], fit: Model,
     tol = 1e-3 if refit_noise else 1e-2
     res = minimize(total, start, method="Nelder-Mead",
                    options={"xatol": tol, "fatol": tol * max(best, 1e-3),
-                            "maxfev": (200 if refit_noise else 40) * len(names)})
+                            "maxfev": (200 if refit_noise else 25) * len(names)})
+    if found is not None and res.fun < best:
+        found.update({k: math.exp(min(max(float(v), bounds[k][0]), bounds[k][1]))
+                      for k, v in zip(names, res.x, strict=True)})
     return float(max(min(res.fun, best), 0.0))
 
 
@@ -212,15 +216,19 @@ def _spectrum(model: Model, params: Mapping[str, float], dt: float, w: np.ndarra
 
 
 def expected_lr(r: Rivals, t: np.ndarray, temp: np.ndarray, dt: float,
-                refit_noise: bool = True) -> dict[str, float]:
+                refit_noise: bool = True, warm: dict[str, dict[str, float]] | None = None
+                ) -> dict[str, float]:
     """Λ each direction on the record (``t``, case ``temp``): ``{a: Λ(A→B), b: Λ(B→A)}``
     (the right model's expected LR when it generated the data); ``refit_noise=False``:
-    the wrong model's noise levels held (the search's cheaper Λ)."""
+    the wrong model's noise levels held (the search's cheaper Λ); ``warm``: per direction,
+    the last re-fit's parameters, where each re-fit starts and what it leaves."""
     out = {}
     for truth, fit in ((r.a, r.b), (r.b, r.a)):
         mt, pt = r.side(truth)
         mf, pf = r.side(fit)
-        out[truth] = divergence(mt, pt, mf, pf, t, temp, dt, refit_noise=refit_noise)
+        last = warm.setdefault(truth, {}) if warm is not None else None
+        out[truth] = divergence(mt, pt, mf, {**pf, **(last or {})}, t, temp, dt,
+                                refit_noise=refit_noise, found=last)
     return out
 
 
@@ -258,8 +266,11 @@ def separate(r: Rivals, limits: ChamberLimits, *, reference: Program | None = No
     ref = reference or standard_cycle(limits)
     grid = limits.grid
 
+    warm: dict[str, dict[str, float]] = {}  # consecutive programs are alike: warm starts
+
     def objective(case: np.ndarray) -> float:
-        lam = sum(expected_lr(r, grid, case, limits.dt, refit_noise=False).values())
+        lam = sum(expected_lr(r, grid, case, limits.dt, refit_noise=False,
+                              warm=warm).values())
         return -math.log(lam) if lam > 0 else math.inf
 
     prog, count = search(objective, limits, ref, starts=starts, maxfev=maxfev, seed=seed,

@@ -154,13 +154,10 @@ def test_the_command_writes_the_separating_program(tmp_path):
         assert (out / name).stat().st_size > 0
 
 
-def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
-    """The trend / warm-up look-alikes of a 4-h chamber run (10..45 °C, ramps up to 2 °C/min):
-    the look-alike carries the `design --separate` command with this run's path, model and
-    limits (JSON too, the term's advice kept), the text prints it, and it runs."""
-    from gyrostand.cli import build_parser
+def _trend_run_diagnosis(tmp_path):
+    """A 4-h chamber run (10..45 °C, ramps up to 2 °C/min) with a hidden trend, diagnosed
+    with the trend and warm-up candidates: (its path, temperatures, subject, report)."""
     from gyrostand.core.candidates import diagnose
-    from gyrostand.render.text import diagnosis
     from gyrostand.workbench import open_subject
     from gyrostand.workbench.steps import with_design_commands
 
@@ -175,6 +172,17 @@ def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
     subject = open_subject(path)
     rep = with_design_commands(diagnose(subject.samples, subject.model,
                                         terms=["trend", "warmup"]), subject)
+    return path, temp, subject, rep
+
+
+def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
+    """The trend / warm-up look-alikes of a 4-h chamber run: the look-alike carries the
+    `design --separate` command with this run's path, model and limits (JSON too, the
+    term's advice kept), and the text prints it."""
+    from gyrostand.cli import build_parser
+    from gyrostand.render.text import diagnosis
+
+    path, temp, subject, rep = _trend_run_diagnosis(tmp_path)
     (la,) = rep.look_alikes
     assert "warm-up settles" in la["advice"]
     cmd = shlex.split(la["command"])
@@ -188,6 +196,16 @@ def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
     assert rep.to_dict()["look_alikes"][0]["command"] == la["command"]
     assert la["command"] in diagnosis(rep, str(path))
 
+
+@pytest.mark.slow
+def test_the_printed_command_runs(tmp_path):
+    """The command diagnose prints designs a run (reduced search): the run's own record is
+    the reference, its limits those of the run, the trend's fit near the truth."""
+    from gyrostand.cli import build_parser
+
+    _, _, _, rep = _trend_run_diagnosis(tmp_path)
+    cmd = shlex.split(rep.look_alikes[0]["command"])
+    args = build_parser().parse_args(cmd[1:])
     out = tmp_path / "d"
     p = subprocess.run([sys.executable, "-m", "gyrostand", *cmd[1:], "--evaluations", "4",
                         "--legs", "3", "--out", str(out), "--json"],
