@@ -14,10 +14,13 @@ Spreads — with a ``serial`` column, per parameter and type, from the runs of u
 at least two runs (one-way analysis of variance, serial = group):
 
     turn-on to turn-on  s_w = sqrt( Σ_u Σ_i (x_ui − x̄_u)² / Σ_u (n_u − 1) )
-    unit to unit        s_b = std of the units' means x̄_u (ddof 1, over every unit)
+    unit to unit        s_b = sqrt( max(0, var(x̄_u) − s_w² · mean(1/n_u)) )
+
+each with a 95 % χ² interval (:func:`spreads`).
 
 Trend (ageing) — with ``serial`` and ``date`` (ISO dates), per unit with two or more
-dates: the least-squares slope of the parameter over time, per year.
+dates: the least-squares slope of the parameter over time, per year, with its t interval
+from three runs on; ``--trend SERIAL`` picks one unit for its own section and plot.
 """
 
 from __future__ import annotations
@@ -33,8 +36,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "write_view",
-           "Z_LIMIT", "MIN_GROUP"]
+__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "units", "write_view",
+           "Z_LIMIT", "MIN_GROUP", "CONFIDENCE"]
 
 #: |robust z| above this is an outlier (Iglewicz & Hoaglin's 3.5)
 Z_LIMIT = 3.5
@@ -102,8 +105,30 @@ def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return flags
 
 
+#: the confidence level of every interval of the fleet view
+CONFIDENCE = 0.95
+
+
+def _chi2_std_ci(s: float, dof: int) -> list[float]:
+    """The χ² interval of a standard deviation ``s`` on ``dof`` degrees of freedom."""
+    from scipy.stats import chi2
+
+    a = (1 - CONFIDENCE) / 2
+    return [s * math.sqrt(dof / chi2.ppf(1 - a, dof)), s * math.sqrt(dof / chi2.ppf(a, dof))]
+
+
 def spreads(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per type and parameter: units, runs, turn-on-to-turn-on s_w, unit-to-unit s_b."""
+    """Per type and parameter: units, runs, turn-on-to-turn-on s_w and unit-to-unit s_b,
+    each with its :data:`CONFIDENCE` interval.
+
+    s_w is pooled over the units with two or more runs (χ² interval on Σ(n_u − 1) dof).
+    The units' means scatter by s_b² + s_w²/n_u, so s_b is the std of the means with the
+    turn-on part taken out (the one-way random-effects estimate):
+
+        s_b² = max(0, var(x̄_u) − s_w² · mean(1/n_u))
+
+    and its interval is the χ² interval of var(x̄_u) (units − 1 dof) with the same part
+    taken out of both ends (clamped at 0). ``unit_means_std`` is std(x̄_u) itself."""
     out = []
     ok = [r for r in rows if r.get("status") == "ok" and r.get("serial")]
     for p in param_columns(ok):
@@ -120,15 +145,23 @@ def spreads(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                     m = sum(xs) / len(xs)
                     ss += sum((x - m) ** 2 for x in xs)
                     dof += len(xs) - 1
+            s_w = math.sqrt(ss / dof) if dof else None
             means = [sum(xs) / len(xs) for xs in units.values()]
-            s_b = None
+            s_m = s_b = None
+            s_b_ci = None
             if len(means) > 1:
                 mm = sum(means) / len(means)
-                s_b = math.sqrt(sum((m - mm) ** 2 for m in means) / (len(means) - 1))
+                s_m = math.sqrt(sum((m - mm) ** 2 for m in means) / (len(means) - 1))
+                part = (s_w or 0.0) ** 2 * sum(1 / len(x) for x in units.values()) / len(units)
+                s_b = math.sqrt(max(0.0, s_m * s_m - part))
+                lo, hi = _chi2_std_ci(s_m, len(means) - 1)
+                s_b_ci = [math.sqrt(max(0.0, lo * lo - part)), math.sqrt(max(0.0, hi * hi - part))]
             out.append({"type": typ, "parameter": p, "units": len(units),
                         "runs": sum(len(x) for x in units.values()),
-                        "turn_on_to_turn_on": math.sqrt(ss / dof) if dof else None,
-                        "unit_to_unit": s_b})
+                        "turn_on_to_turn_on": s_w,
+                        "turn_on_to_turn_on_ci": _chi2_std_ci(s_w, dof) if dof and s_w else None,
+                        "unit_to_unit": s_b, "unit_to_unit_ci": s_b_ci,
+                        "unit_means_std": s_m})
     return out
 
 
@@ -139,20 +172,30 @@ def _date(x: Any) -> _dt.date | None:
         return None
 
 
-def trends(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per unit (serial/gyro) and parameter with two or more dates: slope per year."""
+def _unit(row: dict[str, Any]) -> str:
+    return f"{row['serial']}/{row.get('gyro')}"
+
+
+def trends(rows: Sequence[dict[str, Any]], unit: str | None = None) -> list[dict[str, Any]]:
+    """Per unit (serial/gyro) and parameter with two or more dates: the least-squares
+    slope per year; with three or more runs also its standard error and
+    :data:`CONFIDENCE` interval (Student t on n − 2 dof). ``unit``: only that unit
+    (``SERIAL`` for each of its gyros, or ``SERIAL/GYRO``)."""
+    from scipy.stats import t as student
+
     out = []
     ok = [r for r in rows if r.get("status") == "ok" and r.get("serial") and
           _date(r.get("date")) is not None]
+    if unit is not None:
+        ok = [r for r in ok if unit in (str(r["serial"]), _unit(r))]
     for p in param_columns(ok):
         units: dict[str, list[tuple[float, float]]] = {}
         for r in ok:
             v = _num(r.get(p))
             d = _date(r.get("date"))
             if v is not None and d is not None:
-                units.setdefault(f"{r['serial']}/{r.get('gyro')}", []).append(
-                    (d.toordinal() / 365.25, v))
-        for unit, pts in sorted(units.items()):
+                units.setdefault(_unit(r), []).append((d.toordinal() / 365.25, v))
+        for name, pts in sorted(units.items()):
             ts = [t for t, _ in pts]
             if len(set(ts)) < 2:
                 continue
@@ -160,9 +203,23 @@ def trends(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             vm = sum(v for _, v in pts) / len(pts)
             sxx = sum((t - tm) ** 2 for t in ts)
             slope = sum((t - tm) * (v - vm) for t, v in pts) / sxx
-            out.append({"unit": unit, "parameter": p, "runs": len(pts),
-                        "slope_per_year": slope, "mean": vm})
+            rec: dict[str, Any] = {"unit": name, "parameter": p, "runs": len(pts),
+                                   "slope_per_year": slope, "mean": vm,
+                                   "slope_std": None, "slope_ci": None}
+            dof = len(pts) - 2
+            if dof > 0:
+                rss = sum((v - vm - slope * (t - tm)) ** 2 for t, v in pts)
+                se = math.sqrt(rss / dof / sxx)
+                q = float(student.ppf(0.5 + CONFIDENCE / 2, dof))
+                rec["slope_std"] = se
+                rec["slope_ci"] = [slope - q * se, slope + q * se]
+            out.append(rec)
     return out
+
+
+def units(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """The units (``SERIAL/GYRO``) of the ok rows with a serial."""
+    return sorted({_unit(r) for r in rows if r.get("status") == "ok" and r.get("serial")})
 
 
 # --- the page ---------------------------------------------------------------------------
@@ -251,6 +308,8 @@ _CSS = ("body{font-family:sans-serif;font-size:13px;margin:1em}"
 def _cell(v: Any) -> str:
     if v is None:
         return "<td></td>"
+    if isinstance(v, list) and all(isinstance(x, float) for x in v):
+        return "<td>[" + ", ".join(f"{x:.4g}" for x in v) + "]</td>"
     if isinstance(v, float):
         return f'<td data-v="{v!r}">{v:.5g}</td>'
     return f"<td>{html.escape(str(v))}</td>"
@@ -265,16 +324,52 @@ def _simple_table(items: Sequence[dict[str, Any]]) -> str:
     return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
 
+def _unit_plots(rows: Sequence[dict[str, Any]], unit: str,
+                trd: Sequence[dict[str, Any]]) -> list[tuple[str, str]]:
+    """(title, base64 PNG) per parameter of one unit: its values (±1 std) over dates and
+    the fitted ageing line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    mine = [r for r in rows if r.get("status") == "ok" and r.get("serial")
+            and unit in (str(r["serial"]), _unit(r)) and _date(r.get("date")) is not None]
+    out = []
+    for t in trd:
+        p = t["parameter"]
+        pts = sorted((_date(r.get("date")), float(r[p]), _num(r.get(f"{p}_std")) or 0.0)
+                     for r in mine if _unit(r) == t["unit"] and _num(r.get(p)) is not None)
+        fig, ax = plt.subplots(figsize=(7, 2.6))
+        ax.errorbar([d for d, _, _ in pts], [v for _, v, _ in pts],  # type: ignore[arg-type]
+                    yerr=[e for _, _, e in pts], fmt="o", ms=3, lw=0.8)
+        tm = sum(d.toordinal() for d, _, _ in pts) / len(pts) / 365.25  # type: ignore[union-attr]
+        line = [t["mean"] + t["slope_per_year"] * (d.toordinal() / 365.25 - tm)  # type: ignore[union-attr]
+                for d, _, _ in pts]
+        ci = t["slope_ci"]
+        lab = f"{t['slope_per_year']:.4g}/year" + (f" [{ci[0]:.3g}, {ci[1]:.3g}]" if ci else "")
+        ax.plot([d for d, _, _ in pts], line, "-", lw=1.0, color="tab:red", label=lab)  # type: ignore[arg-type]
+        ax.legend(fontsize=7)
+        ax.set_title(f"{t['unit']}: {p} over dates (±1 std) and its trend", fontsize=9)
+        ax.tick_params(labelsize=7)
+        fig.autofmt_xdate()
+        out.append((f"{t['unit']} {p} trend", _png(fig)))
+        plt.close(fig)
+    return out
+
+
 def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
-               attrs: Sequence[str] = ()) -> Path:
+               attrs: Sequence[str] = (), trend_unit: str | None = None) -> Path:
     """``<out>/fleet.html`` (atomically) and ``<out>/fleet.json`` (flags, spreads,
-    trends); the table's runs link to their reports."""
+    trends, and with ``trend_unit`` that unit's trends); the table's runs link to their
+    reports."""
     from .table import _columns
 
     out = Path(out)
     flags = outliers(rows)
     spr = spreads(rows)
     trd = trends(rows)
+    mine = trends(rows, trend_unit) if trend_unit else []
     flagged = {(f["run"], f["gyro"], f["parameter"]) for f in flags}
     cols = [c for c in _columns(rows, attrs) if c not in ("source", "config", "run_dir")]
     head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
@@ -303,7 +398,13 @@ def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
         f"groups of {MIN_GROUP}+)</h2>{_simple_table(flags)}"
         f"<h2>Spread per parameter (turn-on to turn-on, unit to unit)</h2>"
         f"{_simple_table(spr)}"
-        f"<h2>Trend per unit (slope per year)</h2>{_simple_table(trd)}"
+        + (f"<h2>Trend of {html.escape(trend_unit)} (slope per year, "
+           f"{CONFIDENCE:.0%} interval)</h2>{_simple_table(mine)}"
+           + "".join(f'<figure><img alt="{html.escape(t)}" src="data:image/png;base64,{b}">'
+                     f"</figure>" for t, b in _unit_plots(rows, trend_unit, mine))
+           if trend_unit else "")
+        + f"<h2>Trend per unit (slope per year, {CONFIDENCE:.0%} interval)</h2>"
+        f"{_simple_table(trd)}"
         f"<h2>Plots</h2>{plots or '<p>no parameters</p>'}"
         f"<h2>Table (click a header to sort)</h2>"
         f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}'
@@ -311,7 +412,9 @@ def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
     from .table import _atomic_bytes
 
     _atomic_bytes(out / "fleet.json", (json.dumps(
-        {"outliers": flags, "spreads": spr, "trends": trd}, indent=1, allow_nan=False)
+        {"outliers": flags, "spreads": spr, "trends": trd,
+         **({"trend_unit": {"unit": trend_unit, "trends": mine}} if trend_unit else {})},
+        indent=1, allow_nan=False)
         + "\n").encode("utf-8"))
     path = out / "fleet.html"
     _atomic_bytes(path, page.encode("utf-8"))

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataError
+from ..runfolder.layout import REPORT, RESULT
 from .inputs import RunSpec
 
 __all__ = ["TaskOptions", "run_task", "failed_record", "result_path", "read_record",
@@ -113,7 +114,7 @@ def _replay_into(spec: RunSpec, out: Path) -> Path:
     from ..session.outputs import raw_segments
 
     dest = out / "replays" / spec.run
-    done = dest / "result.json"
+    done = dest / RESULT
     if done.is_file():
         try:
             info = json.loads(done.read_text(encoding="utf-8"))
@@ -128,10 +129,10 @@ def _replay_into(spec: RunSpec, out: Path) -> Path:
             raise DataError(f"{spec.path}: no raw log (raw.blf) to replay")
         config = spec.config
         if config is None:
-            info = json.loads((Path(spec.path) / "result.json").read_text(encoding="utf-8"))
+            info = json.loads((Path(spec.path) / RESULT).read_text(encoding="utf-8"))
             config = info.get("config")
             if not config:
-                raise DataError(f"{spec.path}/result.json: no 'config' to replay it with")
+                raise DataError(f"{spec.path}/{RESULT}: no 'config' to replay it with")
     else:
         logs = [Path(spec.path)]
         config = spec.config
@@ -145,7 +146,7 @@ def _replay_into(spec: RunSpec, out: Path) -> Path:
                              parallel=False)  # one core per worker; Dask workers are daemons
         info = json.loads(outcome.result_json.read_text(encoding="utf-8"))
         info["batch_source"] = spec.path
-        (outcome.run_dir / "result.json").write_text(json.dumps(info, indent=2) + "\n",
+        (outcome.run_dir / RESULT).write_text(json.dumps(info, indent=2) + "\n",
                                                      encoding="utf-8")
         shutil.rmtree(dest, ignore_errors=True)
         os.replace(outcome.run_dir, dest)
@@ -158,7 +159,7 @@ def _run_info(run_dir: Path) -> dict[str, Any]:
     from ..cli.workbench_args import check_run_folder
 
     check_run_folder(run_dir)
-    info = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
+    info = json.loads((run_dir / RESULT).read_text(encoding="utf-8"))
     if info.get("state") == "failed":
         raise DataError(f"{run_dir}: the run failed: {info.get('error', 'no reason given')}")
     return info
@@ -236,7 +237,7 @@ def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
         dec = info.get("stats", {}).get("decoder", {})
         rec["run_dir"] = str(run_dir)
         report = run_dir / "report.html"
-        rec["report"] = str(report if report.is_file() else run_dir / "report.txt")
+        rec["report"] = str(report if report.is_file() else run_dir / REPORT)
         damage = info.get("stats", {}).get("log") or {}
         n_damage = sum(int(damage.get(k) or 0) for k in ("containers_skipped", "truncated",
                                                           "lines_skipped"))
@@ -248,7 +249,7 @@ def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
                              + (f" ({notes})" if notes else ""))
         gyros = info.get("gyros") or {}
         if not gyros:
-            raise DataError(f"{run_dir}/result.json: the run has no gyros")
+            raise DataError(f"{run_dir}/{RESULT}: the run has no gyros")
         for gyro, ginfo in gyros.items():
             try:
                 row = _gyro_row(run_dir, gyro, ginfo, opts)

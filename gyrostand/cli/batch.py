@@ -66,6 +66,9 @@ def add_parser(sub: Any) -> None:
                    help="redo every run, even those done with these options")
     g.add_argument("--retry-failed", action="store_true",
                    help="redo the runs whose record is a failure")
+    p.add_argument("--trend", default=None, metavar="UNIT",
+                   help="one unit's ageing in the fleet view: SERIAL (each of its gyros) or "
+                        "SERIAL/GYRO; its slopes with intervals are also printed")
     p.add_argument("--no-view", action="store_true",
                    help="write the table only, not the fleet page")
     p.set_defaults(func=run)
@@ -102,6 +105,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--workers {args.workers}: at least 1")
     specs = collect_runs(args.inputs, config=args.config, manifest=args.manifest)
     attrs = list(dict.fromkeys(k for s in specs for k in s.attrs))
+    if args.trend is not None:
+        serials = sorted({str(s.attrs["serial"]) for s in specs if s.attrs.get("serial")})
+        if args.trend.split("/", 1)[0] not in serials:
+            known = ", ".join(serials) or "none: give a manifest with a serial column"
+            raise ConfigError(f"--trend {args.trend}: no run of that serial in the inputs "
+                              f"(serials: {known})")
     tty = sys.stderr.isatty() and not args.quiet
     last = [0.0]
 
@@ -148,7 +157,18 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_view:
         from ..batch.fleet import write_view
 
-        paths["html"] = write_view(rows, args.out, attrs)
+        paths["html"] = write_view(rows, args.out, attrs, trend_unit=args.trend)
+    if args.trend is not None:
+        from ..batch.fleet import trends
+
+        found = trends(rows, args.trend)
+        if not found:
+            print(f"trend {args.trend}: fewer than two dated ok runs", file=sys.stderr)
+        for t in found:
+            ci = t["slope_ci"]
+            print(f"trend {t['unit']} {t['parameter']}: {t['slope_per_year']:.6g} per year"
+                  + (f" (95 % interval {ci[0]:.6g} … {ci[1]:.6g}, {t['runs']} runs)" if ci
+                     else f" ({t['runs']} runs: no interval)"))
     bad = sum(1 for r in rows if r.get("status") != "ok")
     print(f"{counts.total} runs: {counts.done} done now, {counts.failed} failed now, "
           f"{counts.skipped} done before; {len(rows)} rows ({bad} not ok)")

@@ -115,3 +115,59 @@ def test_bad_steps_and_models_are_usage_errors_before_any_work(capsys, tmp_path)
                  "markov,nosuchterm"]) == 2
     assert "nosuchterm" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_spread_intervals_cover_the_truth_at_their_level():
+    """200 fleets of 8 units x 4 turn-ons: the 95 % intervals of s_w and s_b hold the
+    true values in 90-99 % of fleets (binomial 3-sigma band around 95 % of 200), and s_b
+    with the turn-on part taken out is unbiased enough (median within 10 %)."""
+    cover_w = cover_b = 0
+    est_b = []
+    for seed in range(200):
+        (s,) = fleet.spreads(_fleet(seed=seed, units=8, runs=4, s_w=0.004, s_b=0.003))
+        lo, hi = s["turn_on_to_turn_on_ci"]
+        cover_w += lo <= 0.004 <= hi
+        lo, hi = s["unit_to_unit_ci"]
+        cover_b += lo <= 0.003 <= hi
+        est_b.append(s["unit_to_unit"])
+        assert s["unit_means_std"] >= s["unit_to_unit"]
+    assert 0.90 <= cover_w / 200 <= 0.99, cover_w
+    assert 0.90 <= cover_b / 200 <= 0.995, cover_b
+    assert abs(np.median(est_b) / 0.003 - 1) < 0.1, np.median(est_b)
+
+
+def test_trend_interval_covers_the_planted_slope_and_one_unit_can_be_picked():
+    hits = 0
+    for seed in range(100):
+        rows = _fleet(seed=seed, units=2, runs=6, s_w=0.001, s_b=0.01, slope=0.004)
+        (t,) = fleet.trends(rows, "S1")  # one serial: its one gyro
+        lo, hi = t["slope_ci"]
+        hits += lo <= 0.004 <= hi
+        assert t["unit"] == "S1/az" and t["slope_std"] > 0
+    assert 88 <= hits <= 100, hits  # 95 % nominal; 3-sigma binomial band of 100
+    assert fleet.trends(rows, "S1/az") == fleet.trends(rows, "S1")
+    assert fleet.trends(rows, "S9") == []
+
+
+def test_the_view_has_the_chosen_units_trend(tmp_path):
+    rows = _fleet(units=3, runs=5, s_w=1e-4, s_b=0.01, slope=0.006)
+    page = fleet.write_view(rows, tmp_path, ["serial", "date", "type"],
+                            trend_unit="S2").read_text()
+    assert "Trend of S2" in page and 'alt="S2/az markov.beta trend"' in page
+    import json
+
+    data = json.loads((tmp_path / "fleet.json").read_text())
+    (t,) = data["trend_unit"]["trends"]
+    assert t["unit"] == "S2/az" and abs(t["slope_per_year"] / 0.006 - 1) < 0.1
+
+
+def test_trend_of_an_unknown_serial_is_a_usage_error_before_any_work(capsys, tmp_path):
+    (tmp_path / "s.yaml").write_text("x: 1\n")
+    (tmp_path / "a.blf").write_bytes(b"x")
+    m = tmp_path / "m.csv"
+    m.write_text("path,config,serial,date\na.blf,s.yaml,S1,2026-01-01\n")
+    assert main(["batch", "--manifest", str(m), "--out", str(tmp_path / "o"),
+                 "--trend", "S7"]) == 2
+    assert "--trend S7: no run of that serial in the inputs (serials: S1)" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
