@@ -50,7 +50,9 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
             riv = rivals(Model.parse(args.model), a, b, {"white.sigma": 0.0, **given},
                          limits.grid, ref_case, limits.dt, seed=args.seed)
     with progress.stage("design", f"search: {a} vs {b}", unit="evaluations") as bar:
-        res = separate(riv, limits, reference_record=reference_record,
+        # one start (the best of the standard cycle, zigzags, a random program): 86
+        # programs, 83 s CPU for 6 h at 40 evaluations
+        res = separate(riv, limits, reference_record=reference_record, starts=1,
                        maxfev=args.evaluations, seed=args.seed, progress=bar.update)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -257,7 +257,7 @@ class SeparationResult:
 
 def separate(r: Rivals, limits: ChamberLimits, *, reference: Program | None = None,
              reference_record: tuple[np.ndarray, np.ndarray] | None = None,
-             starts: int = 2, maxfev: int = 80, seed: int = 1,
+             starts: int = 1, maxfev: int = 40, seed: int = 1,
              progress: Callable[[int], None] | None = None) -> SeparationResult:
     """The program within ``limits`` that maximizes the symmetrized Λ (module docstring);
     the reference is ``reference_record`` (a run's own t, temperature) if given, else
