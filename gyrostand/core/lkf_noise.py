@@ -28,41 +28,98 @@ if TYPE_CHECKING:
 RATIO_BOUNDS = (1e-3, 1e2)
 #: step in the log noise parameter for its curvature and the estimate's sensitivity
 NOISE_STEP = 0.1
-#: a noise level searched to a bound of its range: moved this far (log) into it for the
-#: estimate's sensitivity
+#: a noise level searched to a bound of its range: at least this far (log) into it for the
+#: estimate's sensitivity (kept for callers; the reach is the profile's, see PROFILE_DROP)
 BOUND_STEP = 4.0
+#: a level at a bound: its plausible range ends where −ln L has risen by this much, half
+#: the 99.73 % point of χ²(1) (the ±3σ band's level), found on steps of PROFILE_GRID
+PROFILE_DROP = 0.5 * 8.807468
+PROFILE_GRID = 0.25
+#: above this std of ẑ the profile's interval ends replace its curvature
+PROFILE_STD = 0.25
+
+
+def _profile_reach(nll, z: float, inward: float, lo: float, hi: float,
+                   floor: float = BOUND_STEP, drop: float = PROFILE_DROP
+                   ) -> tuple[float, bool]:
+    """How far (> 0, log units) from ``z``, towards ``inward``, the profile ``nll``
+    stays within ``drop`` of its value at ``z``: the first grid step past the drop,
+    interpolated linearly to the drop, at least ``floor``; and whether the drop was
+    reached (False: the profile stays flat to the end of [lo, hi], whose distance is
+    returned)."""
+    base = nll(z)
+    prev_d, prev_rise = 0.0, 0.0
+    span = (hi - z) if inward > 0 else (z - lo)
+    d = PROFILE_GRID
+    while d <= span:
+        rise = nll(z + inward * d) - base
+        if not math.isfinite(rise):
+            break
+        if rise >= drop:
+            frac = (drop - prev_rise) / (rise - prev_rise) if rise > prev_rise else 1.0
+            return max(prev_d + frac * (d - prev_d), floor), True
+        prev_d, prev_rise = d, rise
+        d += PROFILE_GRID
+    return max(min(prev_d, span), floor), False
 
 
 def inflation(f: RelinLKF, n: int, U: np.ndarray) -> None:
     """The held noise levels are estimates: add their share to the covariance of the
-    estimate by the delta method, ``C += (∂θ̂/∂z)(∂θ̂/∂z)' var ẑ`` with z the searched
-    log noise parameter, ``var ẑ`` from the curvature of its profile likelihood and
-    ``∂θ̂/∂z`` from one more pass with z moved by ``h`` (then the state is restored)."""
+    estimate. Each step ``(h, k)`` of the search's record is one more pass with the
+    searched log level z moved to z + h (then the state is restored); its shift of the
+    estimate times ``k`` is a one-std vector ``w`` in the direction of +z:
+
+    * regular (z well determined): one step of one std, ``k = std ẑ / h``, so
+      ``C += (∂θ̂/∂z)(∂θ̂/∂z)' var ẑ``: the delta method;
+    * z poorly determined (std ẑ > PROFILE_STD): the two ends of its profile-likelihood
+      interval at the ±3σ level, ``k = ±1/3``, and per coefficient the larger of the two
+      one-std shifts (the band then holds the estimate at either end, asymmetry and
+      curvature of θ̂(z) included; equal to the delta method when θ̂(z) is linear and the
+      profile quadratic);
+    * at a bound: one step to the profile's reach, ``k = 1/3``, plus the filter's wider
+      band there (the level is not estimated)."""
     f._infl = np.zeros((len(f.names),) * 2)
     if f._noise is None:
         return
-    apply, z, var_z, h, at_bound = f._noise
+    apply, z, _var_z, steps, at_bound = f._noise
 
     saved = (f.x.copy(), f.P.copy(), f._st.copy(), f._E[:n].copy(),
              f._F[:n].copy(), dict(f.held), f._qd)
     v0 = f.values.copy()
-    apply(z + h)
-    f._configure()
-    f._start()
-    f._pass(0, n, U)
-    dv = (f.values - v0) / h
     k = len(f.names)
-    extra = f.P[1: 1 + k, 1: 1 + k] - saved[1][1: 1 + k, 1: 1 + k]
-    f.x, f.P, f._st = saved[0], saved[1], saved[2]
-    f._E[:n], f._F[:n] = saved[3], saved[4]
-    f.held, f._qd = saved[5], saved[6]
+    w: np.ndarray | None = None
+    extra = np.zeros((k, k))
+    curv = np.zeros((k, k))
+    for h, scale in steps:
+        apply(z + h)
+        f._configure()
+        f._start()
+        f._pass(0, n, U)
+        wi = (f.values - v0) * scale
+        ex = f.P[1: 1 + k, 1: 1 + k] - saved[1][1: 1 + k, 1: 1 + k]
+        if np.trace(ex) > np.trace(extra):
+            extra = ex
+        curv += 0.5 * scale * scale * ex
+        f.x, f.P, f._st = saved[0].copy(), saved[1].copy(), saved[2].copy()
+        f._E[:n], f._F[:n] = saved[3], saved[4]
+        f.held, f._qd = dict(saved[5]), saved[6]
+        if not np.all(np.isfinite(wi)):
+            w = None
+            break
+        w = wi if w is None else np.where(np.abs(wi) > np.abs(w), wi, w)
     f._configure()
-    if np.all(np.isfinite(dv)):
-        f._infl = np.outer(dv, dv) * var_z
+    if w is not None:
+        f._infl = np.outer(w, w)
         if at_bound and np.all(np.diag(extra) > 0):
             # ... and at a bound (the level not estimated), the wider band of the
             # level moved into its range (inside it, that term averages out)
             f._infl += extra
+        elif len(steps) > 1 and np.all(np.diag(curv) > 0):
+            # ... and with a step each way, the filter's own band averaged over the
+            # level's uncertainty to second order: E P(z) ≈ P(ẑ) + ½ P''(ẑ) var ẑ, the
+            # second difference of P over the two steps (each scaled to one std)
+            f._infl += curv
+
 
 def reestimate(f: RelinLKF, ctx: Context) -> None:
     """The held noise levels not fixed by the caller, at the current point."""
@@ -173,11 +230,33 @@ def reestimate(f: RelinLKF, ctx: Context) -> None:
         # does not move the estimate and σ (the scale) is concentrated
         f._noise = None
         return
+    prof = lambda zz: nll(zz, scale_free)[0]  # noqa: E731
     if at_bound:
-        # at a bound of its search the level is not estimated: the estimate's share is
-        # its change when the level moves by BOUND_STEP into the range (var ẑ = step²)
-        h = BOUND_STEP if z - lo < 0.05 else -BOUND_STEP
-        var_z = h * h
+        # at a bound of its search the level is not estimated and the curvature means
+        # nothing: the plausible levels reach from the bound to where the profile
+        # likelihood has fallen by PROFILE_DROP (its ±3σ-equivalent limit). The
+        # sensitivity pass goes there, and the band is widened so that its ±3 std hold
+        # the estimate at that level, plus the filter's wider band there.
+        inward = 1.0 if z - lo < 0.05 else -1.0
+        h = inward * _profile_reach(prof, z, inward, lo, hi)[0]
+        f._noise = (apply, z, (h / 3.0) ** 2, ((h, 1.0 / 3.0),), True)
+        return
+    if math.sqrt(var_z) > PROFILE_STD:
+        # poorly determined (a short record): the curvature at ẑ misjudges a skewed
+        # profile; its interval's two ends at the ±3σ level instead
+        up_end, up_closed = _profile_reach(prof, z, 1.0, lo, hi, floor=0.0)
+        down_end, down_closed = _profile_reach(prof, z, -1.0, lo, hi, floor=0.0)
+        # each side where the profile closes inside the range: its end at the ±3σ
+        # level; a side where it stays flat to an end of the range: the delta
+        # method's one-std step that way
+        sd = math.sqrt(var_z)
+        steps = tuple((d, sgn / 3.0) if closed else (sgn * sd, sgn)
+                      for d, sgn, closed in ((up_end, 1.0, up_closed),
+                                             (-down_end, -1.0, down_closed))
+                      if d != 0 and lo <= z + (d if closed else sgn * sd) <= hi)
+        if steps:
+            f._noise = (apply, z, var_z, steps, False)
+            return
     if not lo <= z + h <= hi:
         h = -h
-    f._noise = (apply, z, var_z, h, at_bound)
+    f._noise = (apply, z, var_z, ((h, math.sqrt(var_z) / h),), False)

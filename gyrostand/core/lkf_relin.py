@@ -157,8 +157,10 @@ class RelinLKF:
         self.total_passes = 0
         self._since = 0
         self._qd: float | None = None
-        #: (apply, ẑ, var ẑ, step, at bound) of the last noise search, or None
-        self._noise: tuple[Callable[[float], None], float, float, float, bool] | None = None
+        #: (apply, ẑ, var ẑ, steps (h, k) of the inflation passes, at bound) of the last
+        #: noise search, or None
+        self._noise: tuple[Callable[[float], None], float, float,
+                           tuple[tuple[float, float], ...], bool] | None = None
         self._infl = np.zeros((len(self.names),) * 2)
         self._configure()
         self.x = np.zeros(len(self.layout))

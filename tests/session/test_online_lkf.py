@@ -158,4 +158,25 @@ def test_monte_carlo_of_the_daemons_online_lkf(case, sigma_v):
     lim = 1.2 if case == "C3" else 1.1
     assert rb <= lim and rg <= lim, (rb, rg)
     assert 0.85 <= spread <= 1.2, spread
-    assert cov.min() >= (0.85 if (case, sigma_v) == ("C3", 0.05) else 0.95), cov
+    # C3 σ_v = σ/2 at 400-500 s: 0.955-0.96 on the benchmark's 200 runs (ML's own band:
+    # 0.84), from 0.875 before the held noise levels' band came from their profile
+    assert cov.min() >= (0.92 if (case, sigma_v) == ("C3", 0.05) else 0.95), cov
+
+
+def test_a_short_record_with_a_poorly_determined_noise_level_keeps_an_honest_band():
+    """C3, σ_v = σ/2, the first 400 s (100 bins after the warm-up): the drift's σ is
+    barely determined (often searched to its bound, σ_v/σ = 100), and the band whose
+    noise share came from the profile's curvature, or a fixed step at a bound, held the
+    truth (β and γ both) in 35 of these 40 runs. Its share now comes from the profile
+    likelihood's ±3σ interval: at least 37 of 40."""
+    beta, gamma = CASES["C3"]
+    p = {"markov.beta": beta, "markov.sigma": 0.1, "temp.gamma": gamma, "white.sigma": 0.05}
+    held = 0
+    for seed in range(40):
+        s = simulate(M, p, paper_profile(), seed=seed)
+        tr = LkfTrack(M, LkfConfig(), 1.0)
+        for y, T in zip(s.drift[:400], s.temp[:400], strict=True):
+            tr.update(float(y), float(T))
+        v = tr.estimate().values
+        held += all(abs(v[n][0] - p[n]) <= 3 * v[n][1] for n in ("markov.beta", "temp.gamma"))
+    assert held >= 37, held
