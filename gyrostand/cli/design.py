@@ -1,7 +1,9 @@
-"""``gyrostand design [RUN|CSV] --model TERMS --param NAME=VALUE ... [limits] [--goal G]
-[--out DIR] [--verify N]``: the chamber program that best determines the parameters in
-doubt, within the chamber's limits, with its predicted std beside the reference profile's
-(the run's own record, or a standard cycle of the same duration)."""
+"""``gyrostand design [RUN|CSV] --model TERMS --param NAME=VALUE ... [limits] [--goal G |
+--separate A B] [--out DIR] [--verify N]``: the chamber program that best determines the
+parameters in doubt, within the chamber's limits, with its predicted std beside the
+reference profile's (the run's own record, or a standard cycle of the same duration); with
+``--separate A B`` the program that best tells the look-alike terms A and B apart (the
+expected likelihood ratio between the model with A and the model with B)."""
 
 from __future__ import annotations
 
@@ -48,13 +50,17 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--goal", default="d-optimal",
                    help="d-optimal (default), worst (the worst-determined, relative), or "
                         "std:PARAM")
+    p.add_argument("--separate", nargs=2, default=None, metavar=("A", "B"),
+                   help="design the run that tells the look-alike terms A and B apart "
+                        "(e.g. temp_lag markov2): the model with A vs the model with B")
     p.add_argument("--doubt", default=None,
                    help="the parameters in doubt, comma-separated (default: every one)")
     p.add_argument("--evaluations", type=int, default=120,
                    help="likelihood-information evaluations per search start (120)")
     p.add_argument("--verify", type=int, default=0, metavar="N",
                    help="simulate N runs of the designed and of the reference profile, fit "
-                        "them by ML, print realized std beside predicted")
+                        "them by ML, print realized std beside predicted (--separate: N runs "
+                        "from each model, both fitted, how often the right one wins)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", default="design", metavar="DIR",
                    help="folder for program.csv, profile.csv, simulate.yaml, design.json, "
@@ -83,11 +89,15 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design import ChamberLimits, case_temperature, design
+    from ..core.design import case_temperature, design
     from ..core.model import Model
     from ..errors import ModelError
 
     given = _params(args)
+    if args.separate is not None:
+        from .design_separate import run_separate
+
+        return run_separate(args, given)
     reference_record = None
     if args.run is not None:
         from ..core.ml import ml
@@ -107,9 +117,7 @@ def run(args: argparse.Namespace) -> int:
         params = {"white.sigma": 0.0, **given}
         hours = args.hours or 6.0
     model.check_params({**model.defaults, **params})
-    limits = ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
-                           hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
-                           start=args.start)
+    limits = limits_of(args, hours)
     doubt = [n.strip() for n in args.doubt.split(",")] if args.doubt else None
     with progress.stage("design", "search", unit="evaluations") as bar:
         res = design(model, params, limits, goal=args.goal, doubt=doubt,
@@ -126,7 +134,11 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     case = case_temperature(res.program.setpoint(limits.duration), limits)
     ref_case = case_temperature(res.reference.setpoint(limits.duration), limits)
-    _write_files(out, res, limits, case, ref_case, reference_record, ref_label, model)
+    name, rel = res.worst()
+    rname, rrel = res.worst("reference")
+    write_files(out, res.program, res.goal, limits, case, ref_case, reference_record,
+                 ref_label, f"{res.goal}: worst relative std {rel:.3g} ({name}) vs {rrel:.3g} "
+                            f"({rname})")
     verify = None
     if args.verify > 0:
         verify = _verify(model, params, limits, case,
@@ -151,12 +163,7 @@ def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
     return {
         "goal": res.goal, "model": list(model.names), "params": res.params,
         "doubt": list(res.doubt),
-        "limits": {"t_min": limits.t_min, "t_max": limits.t_max,
-                   "max_rate_degC_per_min": limits.max_rate * 60.0,
-                   "min_soak_s": limits.min_soak, "duration_s": limits.duration,
-                   "legs": limits.legs, "lag_s": limits.lag, "start": limits.t0},
-        "program": [{"target_degC": T, "rate_degC_per_min": r * 60.0, "soak_s": s}
-                    for T, r, s in res.program.legs],
+        **program_document(res.program, limits),
         "predicted_std": {n: _finite(v) for n, v in res.predicted.items()},
         "reference": ref_label,
         "reference_std": {n: _finite(v) for n, v in res.reference_predicted.items()},
@@ -166,17 +173,38 @@ def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
     }
 
 
-def _write_files(out: Path, res, limits, case, ref_case, reference_record, ref_label: str,
-                 model) -> None:
+def program_document(program, limits) -> dict[str, Any]:
+    """design.json's ``limits`` and ``program``."""
+    return {
+        "limits": {"t_min": limits.t_min, "t_max": limits.t_max,
+                   "max_rate_degC_per_min": limits.max_rate * 60.0,
+                   "min_soak_s": limits.min_soak, "duration_s": limits.duration,
+                   "legs": limits.legs, "lag_s": limits.lag, "start": limits.t0},
+        "program": [{"target_degC": T, "rate_degC_per_min": r * 60.0, "soak_s": s}
+                    for T, r, s in program.legs],
+    }
+
+
+def limits_of(args: argparse.Namespace, hours: float):
+    """The chamber limits of the command line (°C/min and min converted to SI)."""
+    from ..core.design import ChamberLimits
+
+    return ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
+                         hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
+                         start=args.start)
+
+
+def write_files(out: Path, program, goal: str, limits, case, ref_case, reference_record,
+                 ref_label: str, title: str) -> None:
     import numpy as np
 
-    rows = res.program.rows()
+    rows = program.rows()
     with open(out / "program.csv", "w", encoding="utf-8", newline="") as fh:
         fh.write("time_s,setpoint_degC\n")
         for t, T in rows:
             fh.write(f"{t:.1f},{T:.3f}\n")
     grid = limits.grid
-    sp = res.program.setpoint(limits.duration)(grid)
+    sp = program.setpoint(limits.duration)(grid)
     with open(out / "profile.csv", "w", encoding="utf-8", newline="") as fh:
         fh.write("t,setpoint_degC,case_degC\n")
         for k in range(grid.size):
@@ -188,14 +216,14 @@ def _write_files(out: Path, res, limits, case, ref_case, reference_record, ref_l
     else:
         pts = [[round(t, 1), round(T, 4)] for t, T in rows]
     lines = ["# gyrostand design: paste into a session file's simulate: section to rehearse",
-             f"# the designed run ({res.goal}); the case temperature the model sees.",
+             f"# the designed run ({goal}); the case temperature the model sees.",
              "simulate:", f"  duration: {limits.duration:g}", "  temperature:"]
     lines += [f"    - [{t:g}, {T:g}]" for t, T in pts]
     (out / "simulate.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    _plot(out / "design.png", grid, sp, case, ref_case, reference_record, ref_label, res)
+    _plot(out / "design.png", grid, sp, case, ref_case, reference_record, ref_label, title)
 
 
-def _plot(path: Path, grid, sp, case, ref_case, reference_record, ref_label, res) -> None:
+def _plot(path: Path, grid, sp, case, ref_case, reference_record, ref_label, title) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -210,9 +238,7 @@ def _plot(path: Path, grid, sp, case, ref_case, reference_record, ref_label, res
                 label=ref_label)
     else:
         ax.plot(h, ref_case, lw=1.2, color="C1", label=ref_label)
-    name, rel = res.worst()
-    rname, rrel = res.worst("reference")
-    ax.set_title(f"{res.goal}: worst relative std {rel:.3g} ({name}) vs {rrel:.3g} ({rname})")
+    ax.set_title(title)
     ax.set_xlabel("time, h")
     ax.set_ylabel("temperature, °C")
     ax.legend(loc="best", fontsize=8)
@@ -253,8 +279,9 @@ def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[s
     return out
 
 
-def render(res, limits, ref_label: str, verify, out: Path) -> str:
-    lines = [f"design ({res.goal}; {res.evaluations} evaluations), "
+def program_lines(goal: str, res, limits) -> list[str]:
+    """The header (goal, evaluations, limits) and the designed program's legs."""
+    lines = [f"design ({goal}; {res.evaluations} evaluations), "
              f"{limits.duration / 3600:g} h, {limits.t_min:g}..{limits.t_max:g} °C, "
              f"≤ {limits.max_rate * 60:g} °C/min, soaks ≥ {limits.min_soak / 60:g} min, "
              f"lag {limits.lag / 60:g} min",
@@ -264,6 +291,11 @@ def render(res, limits, ref_label: str, verify, out: Path) -> str:
     for j, (T, r, s) in enumerate(res.program.legs, 1):
         lines.append(f"  leg {j}: ramp at {r * 60:.3g} °C/min to {T:.1f} °C, soak "
                      f"{s / 60:.1f} min")
+    return lines
+
+
+def render(res, limits, ref_label: str, verify, out: Path) -> str:
+    lines = program_lines(res.goal, res, limits)
     lines += ["", f"{'parameter':<16}{'value':>12}{'std designed':>16}{'std ' + ref_label:>26}"
                   f"{'ratio':>8}"]
     for n, v in res.predicted.items():

@@ -44,7 +44,7 @@ from .model import Model
 from .profiles import TemperatureProfile
 
 __all__ = ["ChamberLimits", "Program", "DesignResult", "case_temperature",
-           "standard_cycle", "zigzag", "predicted_std", "design", "GOALS"]
+           "standard_cycle", "zigzag", "predicted_std", "design", "search", "GOALS"]
 
 GOALS = ("d-optimal", "worst", "std:NAME")
 #: the standard chamber cycle's ramp rate, °C/s (0.5 °C/min)
@@ -281,6 +281,47 @@ def goal_function(goal: str, model: Model, params: Mapping[str, float],
     raise ModelError(f"design goal {goal!r}: use d-optimal, worst or std:PARAM")
 
 
+def search(objective: Callable[[np.ndarray], float], limits: ChamberLimits,
+           reference: Program, *, starts: int = 3, maxfev: int = 120, seed: int = 1,
+           progress: Callable[[int], None] | None = None) -> tuple[Program, int]:
+    """The program whose case temperature minimizes ``objective(case)`` (see the module
+    docstring's search), and how many programs it evaluated. Every goal's search: the
+    information goals of :func:`design` and the separation of :mod:`.separation`."""
+    from scipy.optimize import minimize
+
+    count = [0]
+
+    def f(z: np.ndarray) -> float:
+        prog = program_of(z, limits)
+        count[0] += 1
+        if progress is not None:
+            progress(1)
+        if prog.excess > 0:  # ramps too slow for the duration: push back, smoothly
+            return 1e3 + prog.excess / limits.duration * 1e3
+        val = objective(case_temperature(prog.setpoint(limits.duration), limits))
+        return val if np.isfinite(val) else 1e3
+
+    rng = np.random.default_rng(seed)
+    dim = 3 * limits.legs
+    # starts: the reference, zigzags (full and half range, full and half rate), random
+    # programs; the search runs from the ``starts`` best of them
+    cands = [point_of(reference, limits)] + [
+        point_of(zigzag(limits, a, r), limits) for a in (1.0, 0.6) for r in (1.0, 0.5)]
+    cands += [rng.normal(0.0, 1.5, dim) for _ in range(starts)]
+    scored = sorted(((f(x), i) for i, x in enumerate(cands)))
+    best_v, best_x = scored[0][0], cands[scored[0][1]]
+    for _, i in scored[:max(starts, 1)]:
+        res = minimize(f, cands[i], method="Powell",
+                       options={"maxfev": maxfev, "xtol": 1e-2, "ftol": 1e-4})
+        if res.fun < best_v:
+            best_x, best_v = res.x, float(res.fun)
+    res = minimize(f, best_x, method="Powell",
+                   options={"maxfev": maxfev, "xtol": 1e-3, "ftol": 1e-5})
+    if res.fun < best_v:
+        best_x, best_v = res.x, float(res.fun)
+    return program_of(best_x, limits), count[0]
+
+
 @dataclass
 class DesignResult:
     """The designed program, the reference, and what each is predicted to give."""
@@ -320,45 +361,17 @@ def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
     ``n_mc_report``; a designed program the report does not find better than the reference
     is replaced by the reference (the result then says so: ``program is reference``).
     """
-    from scipy.optimize import minimize
-
     model.check_params({**model.defaults, **params})
     f_goal = goal_function(goal, model, params, free, doubt)
     ref = reference or standard_cycle(limits)
-    count = [0]
 
-    def objective(z: np.ndarray) -> float:
-        prog = program_of(z, limits)
-        count[0] += 1
-        if progress is not None:
-            progress(1)
-        if prog.excess > 0:  # ramps too slow for the duration: push back, smoothly
-            return 1e3 + prog.excess / limits.duration * 1e3
-        case = case_temperature(prog.setpoint(limits.duration), limits)
+    def objective(case: np.ndarray) -> float:
         info, names = fisher_information(model, params, limits.grid, case, dt=limits.dt,
                                          free=free, n_mc=n_mc_search, seed=seed)
-        val = f_goal(info, names)
-        return val if np.isfinite(val) else 1e3
+        return f_goal(info, names)
 
-    rng = np.random.default_rng(seed)
-    dim = 3 * limits.legs
-    # starts: the reference, zigzags (full and half range, full and half rate), random
-    # programs; the search runs from the ``starts`` best of them
-    cands = [point_of(ref, limits)] + [
-        point_of(zigzag(limits, a, r), limits) for a in (1.0, 0.6) for r in (1.0, 0.5)]
-    cands += [rng.normal(0.0, 1.5, dim) for _ in range(starts)]
-    scored = sorted(((objective(x), i) for i, x in enumerate(cands)))
-    best_v, best_x = scored[0][0], cands[scored[0][1]]
-    for _, i in scored[:max(starts, 1)]:
-        res = minimize(objective, cands[i], method="Powell",
-                       options={"maxfev": maxfev, "xtol": 1e-2, "ftol": 1e-4})
-        if res.fun < best_v:
-            best_x, best_v = res.x, float(res.fun)
-    res = minimize(objective, best_x, method="Powell",
-                   options={"maxfev": maxfev, "xtol": 1e-3, "ftol": 1e-5})
-    if res.fun < best_v:
-        best_x, best_v = res.x, float(res.fun)
-    prog = program_of(best_x, limits)
+    prog, count = search(objective, limits, ref, starts=starts, maxfev=maxfev, seed=seed,
+                         progress=progress)
 
     def report(p: Program) -> tuple[dict[str, float], float]:
         case = case_temperature(p.setpoint(limits.duration), limits)
@@ -370,6 +383,6 @@ def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
     ref_std, ref_val = report(ref)
     if not val < ref_val:  # the search's cheaper information misled it: never propose worse
         prog, std, val = ref, ref_std, ref_val
-    return DesignResult(goal, prog, ref, std, ref_std, val, ref_val, count[0],
+    return DesignResult(goal, prog, ref, std, ref_std, val, ref_val, count,
                         params={n: float(params[n]) for n in std},
                         doubt=tuple(doubt) if doubt else tuple(std))

@@ -175,7 +175,9 @@ def candidates(rep: Report) -> str:
         out.append(f'<p class="advice"><b>Look-alikes:</b> <code>{e(a)}</code> and '
                    f"<code>{e(b)}</code> explain these data about equally well (ΔAIC "
                    f"{num(la['delta_aic'][0], '.1f')} vs {num(la['delta_aic'][1], '.1f')}). "
-                   f"To separate them: {e(la['advice'])}.</p>")
+                   + (f"To separate them, design the run that does: "
+                      f"<code>{e(la['command'])}</code></p>" if "command" in la else
+                      f"To separate them: {e(la['advice'])}.</p>"))
     return "\n".join(out)
 
 

@@ -108,7 +108,9 @@ def diagnosis(rep: Report, source: str) -> str:
         lines.append("")
         lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
                      f"equally well here (ΔAIC {la['delta_aic'][0]:.1f} vs "
-                     f"{la['delta_aic'][1]:.1f}); to separate them: {la['advice']}")
+                     f"{la['delta_aic'][1]:.1f}); to separate them: "
+                     + (f"design the run that does:\n  {la['command']}" if "command" in la
+                        else la["advice"]))
     if rep.candidates and not rep.adequate and rep.significant:
         best = rep.significant[0]
         lines.append("")

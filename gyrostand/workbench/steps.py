@@ -4,6 +4,7 @@ removed; each step is recorded in the ledger (:mod:`~gyrostand.workbench.ledger`
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from ..core.ml import ml
 from ..core.model import Model
 from ..core.prederror import ModelError
 from ..core.results import DRIFT_UNIT, FitResult
+from ..core.separation import design_command
 from ..errors import GyrostandError, OutputError
 from .ledger import append_ledger
 from .subject import Subject
@@ -50,6 +52,8 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
         fit = ml(subject.samples, subject.model)
     with progress.stage(command, "candidates, residual tests, model-error floor"):
         rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit)
+    if rep.look_alikes:
+        rep = with_design_commands(rep, subject)
     if record:
         err = rep.model_error
         try:
@@ -66,6 +70,17 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
         except OutputError as exc:  # a diagnosis is still worth showing (e.g. disk full)
             log.warning("%s (the diagnosis is not in the ledger)", exc)
     return rep
+
+
+def with_design_commands(rep: Report, subject: Subject) -> Report:
+    """``rep`` with each look-alike pair's ``command``: the ``gyrostand design --separate``
+    run that tells them apart within this run's limits (:func:`design_command`)."""
+    source = subject.run_dir if subject.run_dir is not None else subject.samples.source
+    gyro = subject.gyro if subject.origin == "run" else None
+    return dataclasses.replace(rep, look_alikes=tuple(
+        {**la, "command": design_command(str(source), *la["terms"], subject.samples,
+                                         subject.model, gyro=gyro)}
+        for la in rep.look_alikes))
 
 
 @dataclass(frozen=True)
