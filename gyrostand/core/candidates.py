@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -239,7 +240,10 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
             return None, exc, time.perf_counter() - t0
 
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = min(len(terms), cpus or 1, MAX_THREADS)
+    # in a worker thread (a Dask task: the batch runs one run per core already) one
+    # refit after the other, as ml's evaluator does
+    main = threading.current_thread() is threading.main_thread()
+    workers = min(len(terms), cpus or 1, MAX_THREADS) if main else 1
     if workers <= 1:
         return [one(t) for t in terms]
     # the costliest first (more nonlinear parameters to search: a longer fit), so that the
