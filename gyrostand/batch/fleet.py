@@ -36,7 +36,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "units", "write_view",
+__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "write_view",
            "Z_LIMIT", "MIN_GROUP", "CONFIDENCE"]
 
 #: |robust z| above this is an outlier (Iglewicz & Hoaglin's 3.5)
@@ -136,8 +136,7 @@ def spreads(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         for r in ok:
             v = _num(r.get(p))
             if v is not None:
-                key = f"{r['serial']}/{r.get('gyro')}"
-                groups.setdefault(_type_of(r), {}).setdefault(key, []).append(v)
+                groups.setdefault(_type_of(r), {}).setdefault(_unit(r), []).append(v)
         for typ, units in groups.items():
             ss, dof = 0.0, 0
             for xs in units.values():
@@ -176,6 +175,12 @@ def _unit(row: dict[str, Any]) -> str:
     return f"{row['serial']}/{row.get('gyro')}"
 
 
+def _of_unit(row: dict[str, Any], unit: str) -> bool:
+    """Whether ``row`` belongs to ``unit``: ``SERIAL`` (each of its gyros) or
+    ``SERIAL/GYRO``."""
+    return unit in (str(row["serial"]), _unit(row))
+
+
 def trends(rows: Sequence[dict[str, Any]], unit: str | None = None) -> list[dict[str, Any]]:
     """Per unit (serial/gyro) and parameter with two or more dates: the least-squares
     slope per year; with three or more runs also its standard error and
@@ -187,7 +192,7 @@ def trends(rows: Sequence[dict[str, Any]], unit: str | None = None) -> list[dict
     ok = [r for r in rows if r.get("status") == "ok" and r.get("serial") and
           _date(r.get("date")) is not None]
     if unit is not None:
-        ok = [r for r in ok if unit in (str(r["serial"]), _unit(r))]
+        ok = [r for r in ok if _of_unit(r, unit)]
     for p in param_columns(ok):
         units: dict[str, list[tuple[float, float]]] = {}
         for r in ok:
@@ -215,11 +220,6 @@ def trends(rows: Sequence[dict[str, Any]], unit: str | None = None) -> list[dict
                 rec["slope_ci"] = [slope - q * se, slope + q * se]
             out.append(rec)
     return out
-
-
-def units(rows: Sequence[dict[str, Any]]) -> list[str]:
-    """The units (``SERIAL/GYRO``) of the ok rows with a serial."""
-    return sorted({_unit(r) for r in rows if r.get("status") == "ok" and r.get("serial")})
 
 
 # --- the page ---------------------------------------------------------------------------
@@ -264,7 +264,7 @@ def _plots(rows: Sequence[dict[str, Any]], flags: list[dict[str, Any]]) -> list[
         for _, r in pts:
             d = _date(r.get("date"))
             if r.get("serial") and d is not None:
-                dated.setdefault(f"{r['serial']}/{r.get('gyro')}", []).append((d, float(r[p])))
+                dated.setdefault(_unit(r), []).append((d, float(r[p])))
         if any(len({d for d, _ in v}) > 1 for v in dated.values()):
             fig, ax = plt.subplots(figsize=(7, 2.6))
             for unit, v in sorted(dated.items()):
@@ -334,7 +334,7 @@ def _unit_plots(rows: Sequence[dict[str, Any]], unit: str,
     import matplotlib.pyplot as plt
 
     mine = [r for r in rows if r.get("status") == "ok" and r.get("serial")
-            and unit in (str(r["serial"]), _unit(r)) and _date(r.get("date")) is not None]
+            and _of_unit(r, unit) and _date(r.get("date")) is not None]
     out = []
     for t in trd:
         p = t["parameter"]
