@@ -104,6 +104,17 @@ def time_bounds(dt: float, duration: float) -> tuple[float, float]:
     return float(np.log(TIME_MIN_STEPS * dt)), float(np.log(TIME_MAX_RECORDS * duration))
 
 
+def concentrated_loglik(S: float, n: int, slogf: float, concentrate: bool
+                        ) -> tuple[float, float]:
+    """``(ln L, s²)`` from the whitened residual sum of squares ``S`` of ``n`` observations
+    and ``Σ ln f``: with the common scale concentrated out, s² = S/n; else s² = 1."""
+    S = max(S, 1e-300)
+    if concentrate:
+        s2 = S / n
+        return float(-0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + n)), s2
+    return float(-0.5 * (n * LOG_2PI + slogf + S)), 1.0
+
+
 class _Problem:
     """The concentrated likelihood of one model on one data set."""
 
@@ -206,14 +217,8 @@ class _Problem:
         else:
             A = np.zeros((0, 0))
             theta = np.zeros(0)
-        S = max(S, 1e-300)
-        if self.concentrate:
-            s2 = S / n
-            ll = -0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + n)
-        else:
-            s2 = 1.0
-            ll = -0.5 * (n * LOG_2PI + slogf + S)
-        return float(ll), (p, theta, s2, A)
+        ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
+        return ll, (p, theta, s2, A)
 
     def full_loglik(self, p: Mapping[str, float]) -> float:
         """Exact ln L at natural parameters ``p`` (nothing concentrated): equals

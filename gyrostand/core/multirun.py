@@ -42,9 +42,9 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import DataError, IdentificationError
 from .data import Samples
-from .ml import _lsq_beta, _optimise, _Problem, _start_grid, _starts_from
+from .ml import _lsq_beta, _optimise, _Problem, _start_grid, _starts_from, concentrated_loglik
 from .ml_cov import observed_covariance
-from .model import LOG_2PI, Model
+from .model import Model
 from .results import Estimate, FitResult, _jsonable
 from .validate import prepare, require_samples
 
@@ -190,14 +190,8 @@ class _JointProblem:
             S -= float(b @ theta)
         else:
             theta = np.zeros(0)
-        S = max(S, 1e-300)
-        if self.concentrate:
-            s2 = S / n
-            ll = -0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + n)
-        else:
-            s2 = 1.0
-            ll = -0.5 * (n * LOG_2PI + slogf + S)
-        return float(ll), (ps, theta, s2, A)
+        ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
+        return ll, (ps, theta, s2, A)
 
     def full_loglik(self, p: Mapping[str, float]) -> float:
         """Exact joint ln L at natural joint parameters ``p`` (nothing concentrated)."""
