@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import faulthandler
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -90,7 +91,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         progress.configure(on=False)
 
 
+#: BLAS libraries held to one thread in a command's process (read when numpy loads): the
+#: algebra is on tiny matrices and 1-D series, where a BLAS thread team costs more than it
+#: gives (a ddot of 21,600 values waits for a second core on a loaded machine); the
+#: parallel work runs on the commands' own threads (candidate refits, ML evaluations) and
+#: processes (replay's reader, batch workers). A value the user set is kept.
+_ONE_THREAD = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
+
+
 def _main(argv: Sequence[str] | None = None) -> int:
+    if "numpy" not in sys.modules:
+        for var in _ONE_THREAD:
+            os.environ.setdefault(var, "1")
     parser = build_parser()
     args = parser.parse_args(argv)
     _gather_globals(args)
