@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 from sessionhelpers import DEMO, ROOT, write_cfg_yaml
@@ -64,6 +65,30 @@ def test_demo_runs_from_another_folder(tmp_path, capsys, monkeypatch):
     out = capsys.readouterr().out
     assert "stop acknowledged" in out and "stopped: stop command" in out
     assert "truth" in out and "report:" in out
+    # the demo says what numba compiled in it (nothing, once the caches are written)
+    assert re.search(r"numba: (every kernel loaded from its cache \(nothing compiled\)|"
+                     r"first run: \d+ kernel compilation\(s\) in [\d.]+ s \(.+\)); "
+                     r"demo [\d.]+ s in all", out)
+
+
+def test_the_compile_clock_counts_a_compilation_and_names_it():
+    from numba import njit
+
+    from gyrostand.cli.demo import _CompileClock
+
+    @njit
+    def never_cached_kernel(x):
+        return x * 2.0 + 1.0
+
+    with _CompileClock() as clock:
+        assert never_cached_kernel(1.5) == 4.0
+        assert never_cached_kernel(2.5) == 6.0  # the same signature: no second compile
+    assert clock.kernels == 1 and clock.seconds > 0
+    assert clock.names == ["never_cached_kernel"]
+    assert "1 kernel compilation(s)" in clock.line() and "never_cached_kernel" in clock.line()
+    with _CompileClock() as again:
+        never_cached_kernel(3.5)
+    assert again.kernels == 0 and "nothing compiled" in again.line()
 
 
 def test_errors_exit_2_with_a_message(tmp_path, capsys):
