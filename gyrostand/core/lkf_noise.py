@@ -37,6 +37,9 @@ PROFILE_DROP = 0.5 * 8.807468
 PROFILE_GRID = 0.25
 #: above this std of ẑ the profile's interval ends replace its curvature
 PROFILE_STD = 0.25
+#: z poorly determined: the band is the union of the filter's bands over z's interval
+#: (False: the larger one-std shift of the two ends plus E P(z), kept for comparison)
+UNION = True
 
 
 def _profile_reach(nll, z: float, inward: float, lo: float, hi: float,
@@ -72,12 +75,17 @@ def inflation(f: RelinLKF, n: int, U: np.ndarray) -> None:
     * regular (z well determined): one step of one std, ``k = std ẑ / h``, so
       ``C += (∂θ̂/∂z)(∂θ̂/∂z)' var ẑ``: the delta method;
     * z poorly determined (std ẑ > PROFILE_STD): the two ends of its profile-likelihood
-      interval at the ±3σ level, ``k = ±1/3``, and per coefficient the larger of the two
-      one-std shifts (the band then holds the estimate at either end, asymmetry and
-      curvature of θ̂(z) included; equal to the delta method when θ̂(z) is linear and the
-      profile quadratic);
-    * at a bound: one step to the profile's reach, ``k = 1/3``, plus the filter's wider
-      band there (the level is not estimated)."""
+      interval at the ±3σ level, ``k = ±1/3``; the band is the union of the filter's
+      ±3σ bands over the interval: per coefficient its half-width is the largest of
+      3√P(ẑ) and |θ̂(z_end) − θ̂| + 3√P(z_end) over the ends (P's correlations kept). A
+      side where the profile stays flat to the range's end adds the delta method's
+      one-std shift. Measured on C3 σ_v = σ/2 at 400 s (200 runs): coverage 0.99 for β
+      and γ, against 0.955–0.96 with the larger one-std shift of the two ends plus
+      E P(z) to second order, and ML's own band 0.84. Applied only here: with z well
+      determined the union over a ±3σ interval is far wider than the spread (C3 at
+      1500 s with the threshold at 0.1: every |error| < 1.7 std);
+    * at a bound: one step to the profile's reach, ``k = 1/3``: the union of the bands
+      at the bound and at the reach (the level is not estimated)."""
     f._infl = np.zeros((len(f.names),) * 2)
     if f._noise is None:
         return
@@ -90,13 +98,23 @@ def inflation(f: RelinLKF, n: int, U: np.ndarray) -> None:
     w: np.ndarray | None = None
     extra = np.zeros((k, k))
     curv = np.zeros((k, k))
+    P0 = saved[1][1: 1 + k, 1: 1 + k]
+    # per coefficient, the widest ±3σ reach of the filter's band at an end of the level's
+    # ±3σ profile interval: |θ̂(z_end) − θ̂| + 3 √P(z_end)  (the union of the bands)
+    reach = np.zeros(k)
+    flat = np.zeros(k)
     for h, scale in steps:
         apply(z + h)
         f._configure()
         f._start()
         f._pass(0, n, U)
         wi = (f.values - v0) * scale
-        ex = f.P[1: 1 + k, 1: 1 + k] - saved[1][1: 1 + k, 1: 1 + k]
+        ex = f.P[1: 1 + k, 1: 1 + k] - P0
+        if UNION and abs(abs(scale) - 1.0 / 3.0) < 1e-12:
+            reach = np.maximum(reach, np.abs(f.values - v0)
+                               + 3.0 * np.sqrt(np.maximum(np.diag(f.P)[1: 1 + k], 0.0)))
+        elif UNION:
+            flat = np.maximum(flat, wi * wi)
         if np.trace(ex) > np.trace(extra):
             extra = ex
         curv += 0.5 * scale * scale * ex
@@ -108,6 +126,16 @@ def inflation(f: RelinLKF, n: int, U: np.ndarray) -> None:
             break
         w = wi if w is None else np.where(np.abs(wi) > np.abs(w), wi, w)
     f._configure()
+    if w is not None and UNION and np.any(reach > 0):
+        # z poorly determined, its interval closed on a side: the band holds the union of
+        # the filter's ±3σ bands over the interval (checked at its ends): a coverage of at
+        # least 1 − 2·0.27 % whatever θ̂(z) and P(z) do in between, if they are monotone;
+        # P's correlations kept, each variance raised to its union's (3σ half-width / 3)²
+        d0 = np.sqrt(np.maximum(np.diag(P0), 1e-300))
+        want = np.sqrt(np.maximum(d0 * d0, (reach / 3.0) ** 2) + flat)
+        D = want / d0
+        f._infl = P0 * np.outer(D, D) - P0
+        return
     if w is not None:
         f._infl = np.outer(w, w)
         if at_bound and np.all(np.diag(extra) > 0):
