@@ -177,9 +177,11 @@ def switch_on_lines(res) -> list[str]:
     """The switch-on table of time-only rivals and what it means."""
     r, so = res.rivals, res.switch_ons
     one = sum(so.expected[1].values())
+    tot, ref = sum(res.expected.values()), sum(res.reference_expected.values())
     lines = ["", f"{r.a} and {r.b} are time-only effects: both add a function of the time "
-                 f"since switch-on alone, so no temperature program changes how alike they "
-                 f"look (designed / standard cycle gain {res.gain:.2f}).",
+                 f"since switch-on alone, so a temperature program moves their expected LR "
+                 f"only through the refit of the rest of the model (designed {tot:.3g} vs "
+                 f"standard cycle {ref:.3g}: gain {res.gain:.2f}).",
              f"A switch-on restarts a warm-up, not a trend: the budget split into k runs "
              f"(one standard cycle each; the wrong model refitted jointly over them, "
              f"shared {r.a if r.a != 'warmup' else r.b}, per-run bias and warm-up):",
@@ -189,7 +191,7 @@ def switch_on_lines(res) -> list[str]:
         tot = sum(lam.values())
         lines.append(f"  {k:>4} {so.run_hours[k]:>10.3g} {lam[r.a]:>12.4g} {lam[r.b]:>12.4g} "
                      f"{tot:>10.4g} {tot / one if one > 0 else math.inf:>10.2f}")
-    if so.best > 1 and so.gain * res.gain >= TARGET_GAIN:
+    if so.best > 1 and so.gain >= TARGET_GAIN:
         lines.append(f"-> {so.best} switch-ons of {so.run_hours[so.best]:.3g} h separate them "
                      f"{so.gain:.2f}x better than one run (switch the gyro off between "
                      f"runs long enough for it to cool to the chamber)")

@@ -335,3 +335,28 @@ def test_trend_and_warmup_are_time_only_and_a_split_budget_is_measured():
                           recs, 1.0)
     assert got["failed"] == 0 and got["right_wins_lr"] == 1.0, got
     assert 0.5 * lam <= got["mean_lr"] <= 2 * lam + 2, (got, lam)
+
+
+def test_the_command_says_trend_and_warmup_are_time_only(tmp_path):
+    """``design --separate trend warmup``: the command prints that the rivals are time-only,
+    the table of the budget split into switch-ons and the reachable gain; design.json
+    carries the splits."""
+    out = tmp_path / "d"
+    args = [sys.executable, "-m", "gyrostand", "design", "--model", "markov,temp,bias",
+            *[f"--param={k}={v}" for k, v in {**BASE, "trend.c": 2e-5}.items()],
+            "--separate", "trend", "warmup", "--hours", "2", "--legs", "3",
+            "--evaluations", "3", "--out", str(out)]
+    p = subprocess.run(args, capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr
+    assert "trend and warmup are time-only effects" in p.stdout
+    assert "the reachable gain over the standard cycle is" in p.stdout, p.stdout
+    doc = json.loads((out / "design.json").read_text())
+    so = doc["switch_ons"]
+    assert so["time_only"] is True and [s["runs"] for s in so["splits"]] == [1, 2]
+    assert so["splits"][0]["expected_lr"]["total"] == pytest.approx(
+        doc["expected_lr"]["reference"]["total"], rel=0.05, abs=1e-3)
+    rows = [ln.split() for ln in p.stdout.splitlines() if ln.strip()[:1] in ("1", "2")
+            and len(ln.split()) == 6]
+    assert [r[0] for r in rows] == ["1", "2"], p.stdout
+    assert float(rows[1][4]) == pytest.approx(so["splits"][1]["expected_lr"]["total"],
+                                              rel=1e-3)
