@@ -10,13 +10,15 @@ stationary initial state). Each run is fitted alone by ML and the five jointly
   beside one run's Cramér–Rao bound / √5 (:func:`gyrostand.core.fisher.crlb` at the truth).
   The Fisher information of the shared parameters adds up over the runs (the per-run bias
   and initial state are separate blocks: the Schur complement is 5× one run's), so one
-  run's CRLB / √5 *is* the joint fit's CRLB. A 2-h run determines β poorly and γ's std
-  inherits it (γ's effect passes through the drift's 1/β; with β, σ known γ's CRLB is ~8×
-  smaller); one run's ML is then not efficient — its realized std exceeds its CRLB — while
-  the joint fit, which shares β and σ over five runs, gets close to its own. So the plain
-  ratio falls below 1 (0.82 over 30 sets) by information, not by error; the acceptance
-  "within 20 % of one run's / √5" is checked against the efficient one-run figure, the
-  CRLB / √5, and the joint must be no worse than 1.2 × the plain anchor;
+  run's CRLB / √5 *is* the joint fit's CRLB, and the ratio's expectation is 1 for an
+  efficient fit. An empirical std over n sets has a relative sampling error of about
+  1/√(2(n−1)) (13 % at 30 sets, 7 % at 100), printed beside the ratios: the 0.82 of 30 sets
+  was that noise (100 sets: 0.88, and one run's realized std is 1.04 × its CRLB — the
+  single fits are efficient, nothing is lost or gained by the shared β and σ beyond the
+  information they add). γ's std owes most to β (γ's effect passes through the drift's
+  1/β): with β and σ known it would be 7.6× smaller, which is why the anchor is the full
+  single-run std and not a noise-known one. Targets: the empirical ratio to one run's
+  / √5 and to the CRLB / √5 both within 20 % of 1;
 * the inverse-variance mean of the five single-run γ per set (what combining five separate
   fits gives) beside the joint γ;
 * the repeatability interval's coverage of the true spread 0.1 (95 % Q-profile interval),
@@ -105,6 +107,8 @@ def main(n_sets: int = 100, hours: float = 2.0) -> int:
                         ("robust (1.4826 MAD)", *rob),
                         ("reported (mean)", rep_joint, rep_one)):
         print(f"{label:<28} {j:11.4g} {o:14.4g} {j / o:7.3f} {bound:19.4g} {j / bound:7.3f}")
+    se = float(np.sqrt(1 / (2 * (n_sets - 1)) + 1 / (2 * (N_RUNS * n_sets - 1))))
+    print(f"sampling error of the empirical ratio (relative, 1 sigma): {se:.3f}")
     print(f"five single fits combined (inverse-variance mean per set): empirical std "
           f"{emp_comb:.4g} = {emp_comb / emp_joint:.3f} x the joint's")
     print(f"one run: realized std of gamma {emp_one * np.sqrt(N_RUNS):.4g} = "
@@ -119,10 +123,10 @@ def main(n_sets: int = 100, hours: float = 2.0) -> int:
           f"{TARGET_COVERAGE:.0%}")
     print(f"CPU {cpu / n_sets:.2f} s per set ({N_RUNS} single fits + 1 joint)")
     ratio_ok = (abs(emp_joint / bound - 1) <= TARGET_RATIO
-                and emp_joint / emp_one <= 1 + TARGET_RATIO)
-    print(f"std of gamma: joint within {TARGET_RATIO:.0%} of one run's CRLB/sqrt5: "
-          f"{emp_joint / bound:.3f}; and <= {1 + TARGET_RATIO:g} x one run's/sqrt5: "
-          f"{emp_joint / emp_one:.3f} -> {'ok' if ratio_ok else 'NOT MET'}")
+                and abs(emp_joint / emp_one - 1) <= TARGET_RATIO)
+    print(f"std of gamma: joint within {TARGET_RATIO:.0%} of one run's/sqrt5: "
+          f"{emp_joint / emp_one:.3f}; of one run's CRLB/sqrt5: {emp_joint / bound:.3f} "
+          f"-> {'ok' if ratio_ok else 'NOT MET'}")
     ok = ratio_ok and hits / n_sets >= TARGET_COVERAGE
     print("PASS" if ok else "FAIL")
     return 0 if ok else 1
