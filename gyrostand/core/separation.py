@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,7 +48,8 @@ from .model import Model, context
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Rivals", "SeparationResult", "rivals", "expected_lr", "separate", "verify",
+__all__ = ["Rivals", "SeparationResult", "SwitchOnResult", "rivals", "expected_lr",
+           "separate", "separate_switch_ons", "switch_on_records", "time_only", "verify",
            "run_limits", "design_command"]
 
 #: verify's ML fits: only ln L is used (no standard errors); the best start (the model's
@@ -125,14 +126,38 @@ def mean_response(model: Model, params: Mapping[str, float], s: Samples) -> np.n
 
 def _distance(fit: Model, params: Mapping[str, float], s: Samples) -> float:
     """min_β ‖W (y − X β)‖² with the model's whitening W at ``params``."""
-    X = fit.regressors(params, context(s))
-    E, f = fit.filter_columns(params, s, X)
-    ok = np.isfinite(E[:, 0]) & (f > 0)
-    W = E[ok] / np.sqrt(f[ok])[:, None]
-    if W.shape[1] == 1:
-        return float(W[:, 0] @ W[:, 0])
-    beta, *_ = np.linalg.lstsq(W[:, 1:], W[:, 0], rcond=None)
-    r = W[:, 0] - W[:, 1:] @ beta
+    return _joint_distance(fit, [params], [s])
+
+
+def _joint_distance(fit: Model, params: Sequence[Mapping[str, float]],
+                    records: Sequence[Samples]) -> float:
+    """The same over several runs (run k at ``params[k]``): one least squares over the
+    stacked whitened runs, a shared linear coefficient one column, a per-run one
+    (:func:`~.multirun.per_run_names`: the bias, a warm-up's amplitude) a column per run."""
+    from .multirun import per_run_names
+
+    lin = fit.names_of_kind("linear")
+    per = set(per_run_names(fit))
+    cols = [(j, k) for j, n in enumerate(lin)
+            for k in (range(len(records)) if n in per and len(records) > 1 else [None])]
+    ys, blocks = [], []
+    for k, (q, s) in enumerate(zip(params, records, strict=True)):
+        X = fit.regressors(q, context(s))
+        E, f = fit.filter_columns(q, s, X)
+        ok = np.isfinite(E[:, 0]) & (f > 0)
+        W = E[ok] / np.sqrt(f[ok])[:, None]
+        ys.append(W[:, 0])
+        block = np.zeros((W.shape[0], len(cols)))
+        for c, (j, owner) in enumerate(cols):
+            if owner is None or owner == k:
+                block[:, c] = W[:, 1 + j]
+        blocks.append(block)
+    y = np.concatenate(ys)
+    if not cols:
+        return float(y @ y)
+    A = np.concatenate(blocks)
+    beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r = y - A @ beta
     return float(r @ r)
 
 
@@ -166,42 +191,73 @@ def divergence(truth: Model, truth_params: Mapping[str, float], fit: Model,
     ``refit_noise``, its noise levels (``std``), of the whitened squared distance plus the
     noises' Whittle divergence (module docstring). ``found``: filled with the re-fitted
     nonlinear parameters (a warm start for the next, similar record)."""
+    return divergence_runs(truth, truth_params, fit, fit_params, [(t, temp)], dt,
+                           refit_noise=refit_noise, found=found)
+
+
+def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
+                    fit_params: Mapping[str, float],
+                    records: Sequence[tuple[np.ndarray, np.ndarray]], dt: float, *,
+                    refit_noise: bool = True, found: dict[str, float] | None = None
+                    ) -> float:
+    """Λ(truth→fit) summed over several runs (switch-ons) of one gyro, each record
+    (``t``, ``temp``) its own run: the truth runs each from its own switch-on with the
+    same parameters; ``fit`` is refitted jointly as :mod:`~.multirun` fits several runs
+    (its shared parameters once, its per-run ones — bias, a warm-up's A and τ — once per
+    run). One record: :func:`divergence`."""
     from scipy.optimize import minimize
 
-    s = _samples(t, np.zeros_like(t), temp, dt)
-    s = s.replace(drift=mean_response(truth, truth_params, s))
-    n = len(t)
-    w = 2.0 * np.pi * np.arange(1, n // 2 + 1) / n
-    S0 = _spectrum(truth, truth_params, dt, w)
-    names = mean_parameters(fit, fit_params, s)
+    from .multirun import per_run_names
+
+    recs = []
+    for t, temp in records:
+        s = _samples(t, np.zeros_like(t), temp, dt)
+        recs.append(s.replace(drift=mean_response(truth, truth_params, s)))
+    K = len(recs)
+    grids = []
+    for s in recs:
+        n = len(s)
+        w = 2.0 * np.pi * np.arange(1, n // 2 + 1) / n
+        grids.append((w, _spectrum(truth, truth_params, dt, w), n))
+    names = mean_parameters(fit, fit_params, recs[0])
     if refit_noise:  # the noise levels, and the rates of processes no input goes through
         names += [k for k in fit.param_names if fit.kind(k) in ("std", "rate")
                   and k not in names and fit_params[k] > 0]
-    duration = float(t[-1] - t[0])
+    per = set(per_run_names(fit)) if K > 1 else set()
+    # the searched point: a per-run parameter once per run (owner k), a shared one once
+    slots = [(k, owner) for k in names for owner in (range(K) if k in per else [None])]
+    duration = max(float(t[-1] - t[0]) for t, _ in records)
     bounds = {k: ((math.log(2.0 * dt), math.log(20.0 * max(duration, dt)))
                   if fit.kind(k) == "time" else
                   (math.log(1e-3 / max(duration, dt)), math.log(1.0 / dt))
                   if fit.kind(k) == "rate" else (-math.inf, math.inf)) for k in names}
 
-    def total(z: np.ndarray) -> float:
-        q = dict(fit_params)
-        for k, v in zip(names, z, strict=True):
+    def point(z: np.ndarray) -> list[dict[str, float]]:
+        qs = [dict(fit_params) for _ in range(K)]
+        for (k, owner), v in zip(slots, z, strict=True):
             lo, hi = bounds[k]
-            q[k] = math.exp(min(max(float(v), lo), hi))
-        return _distance(fit, q, s) + _whittle(S0, fit, q, w, dt, n)
+            x = math.exp(min(max(float(v), lo), hi))
+            for r in (range(K) if owner is None else [owner]):
+                qs[r][k] = x
+        return qs
 
-    start = np.array([math.log(fit_params[k]) for k in names])
+    def total(z: np.ndarray) -> float:
+        qs = point(z)
+        return _joint_distance(fit, qs, recs) + sum(
+            _whittle(S0, fit, q, w, dt, n) for q, (w, S0, n) in zip(qs, grids, strict=True))
+
+    start = np.array([math.log(fit_params[k]) for k, _ in slots])
     best = total(start)
-    if not names:
+    if not slots:
         return max(best, 0.0)
     # the search's Λ (noise held) to 1 %, the report's to 0.1 %
     tol = 1e-3 if refit_noise else 1e-2
     res = minimize(total, start, method="Nelder-Mead",
                    options={"xatol": tol, "fatol": tol * max(best, 1e-3),
-                            "maxfev": (200 if refit_noise else 25) * len(names)})
+                            "maxfev": (200 if refit_noise else 25) * len(slots)})
     if found is not None and res.fun < best:
-        found.update({k: math.exp(min(max(float(v), bounds[k][0]), bounds[k][1]))
-                      for k, v in zip(names, res.x, strict=True)})
+        # the shared values (a per-run one: its first run's) warm-start the next record
+        found.update({k: v for k, v in point(res.x)[0].items() if k in names})
     return float(max(min(res.fun, best), 0.0))
 
 
@@ -247,6 +303,8 @@ class SeparationResult:
     #: when the profile hardly separates them (time-only effects: trend, warmup):
     #: (hours, Λ each direction) of a standard cycle :data:`LONGER` × as long
     longer: tuple[float, dict[str, float]] | None = None
+    #: time-only rivals: the budget split into switch-ons (:func:`separate_switch_ons`)
+    switch_ons: SwitchOnResult | None = None
 
     @property
     def gain(self) -> float:
@@ -296,33 +354,45 @@ def separate(r: Rivals, limits: ChamberLimits, *, reference: Program | None = No
     return out
 
 
-def verify(r: Rivals, records: Mapping[str, tuple[np.ndarray, np.ndarray]], n: int, *,
+def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
            seed: int = 1, progress: Callable[[int], None] | None = None
            ) -> dict[str, Any]:
-    """Simulate ``n`` runs from each rival on each record (label → t, case temperature),
-    fit both by ML (each search started at its own parameters) and count how often the
-    right model wins: by likelihood (LR > 0) and by BIC (LR > Δp ln N); the realized mean
-    LR = 2 (ln L_right − ln L_wrong)."""
+    """Simulate ``n`` runs from each rival on each record (label → t, case temperature; or
+    label → a list of them: ``n`` sets of several switch-ons, each run from its own
+    initial state, fitted jointly by :func:`~.multirun.joint_ml`), fit both by ML (each
+    search started at its own parameters) and count how often the right model wins: by
+    likelihood (LR > 0) and by BIC (LR > Δp ln N, a per-run parameter counted once per
+    run); the realized mean LR = 2 (ln L_right − ln L_wrong)."""
     from .ml import ml
+    from .multirun import joint_ml, per_run_names
     from .simulate import simulate
 
     out: dict[str, Any] = {"runs": n}
-    for k, (label, (t, temp)) in enumerate(records.items()):
-        dt = float(np.median(np.diff(t)))
+    for k, (label, rec) in enumerate(records.items()):
+        runs = list(rec) if isinstance(rec, list) else [rec]
+        n_obs = sum(len(t) for t, _ in runs)
         doc: dict[str, Any] = {}
         for j, truth in enumerate((r.a, r.b)):
             other = r.b if truth == r.a else r.a
             mt, pt = r.side(truth)
             mo, po = r.side(other)
-            penalty = (len(mt.param_names) - len(mo.param_names)) * math.log(len(t))
+            per_t, per_o = set(per_run_names(mt)), set(per_run_names(mo))
+            n_t = sum(len(runs) if x in per_t else 1 for x in mt.param_names)
+            n_o = sum(len(runs) if x in per_o else 1 for x in mo.param_names)
+            penalty = (n_t - n_o) * math.log(n_obs)
             rng = np.random.default_rng([seed, 1515, k, j])
             lrs: list[float] = []
             failed = 0
             for _ in range(n):
-                s = simulate(mt, pt, t=t, temp=temp, dt=dt, seed=rng)
+                ss = [simulate(mt, pt, t=t, temp=temp, dt=float(np.median(np.diff(t))),
+                               seed=rng) for t, temp in runs]
                 try:
-                    lt = ml(s, mt, start=pt, **_VERIFY_FIT).loglik
-                    lo = ml(s, mo, start=po, **_VERIFY_FIT).loglik
+                    if len(ss) == 1:
+                        lt = ml(ss[0], mt, start=pt, **_VERIFY_FIT).loglik
+                        lo = ml(ss[0], mo, start=po, **_VERIFY_FIT).loglik
+                    else:
+                        lt = joint_ml(ss, mt, start=pt, **_VERIFY_FIT).loglik
+                        lo = joint_ml(ss, mo, start=po, **_VERIFY_FIT).loglik
                 except GyrostandError as exc:
                     log.warning("verify: a fit failed: %s", exc)
                     failed += 1
@@ -377,3 +447,87 @@ def design_command(source: str, a: str, b: str, samples: Samples, model: Model, 
     if lim["min_soak"] < _MIN_SOAK_MIN:
         words += ["--min-soak", f"{lim['min_soak']:g}"]
     return " ".join(words)
+
+
+# -- time-only rivals: switch-ons ------------------------------------------------------
+
+#: how many switch-ons a split design tries at most, and the shortest run it makes (s)
+MAX_SWITCH_ONS, MIN_RUN = 4, 3600.0
+
+
+def _term_params(model: Model, term: str) -> list[str]:
+    return [n for n in model.param_names if n.startswith(term + ".")]
+
+
+def time_only(r: Rivals) -> bool:
+    """Both rivals' own terms add a deterministic mean that is a function of the time since
+    switch-on alone (trend, warmup): no temperature program changes how alike they look."""
+    t = np.arange(0.0, 600.0)
+    flat = context(_samples(t, t * 0, np.full_like(t, 20.0), 1.0))
+    ramp = context(_samples(t, t * 0, 20.0 + 0.05 * t, 1.0))
+    for model, term, params in ((r.model_a, r.a, r.params_a), (r.model_b, r.b, r.params_b)):
+        names = _term_params(model, term)
+        if not names:
+            return False
+        tm = model.term_of(names[0])
+        p = {**model.defaults, **params}
+        x1, x2 = tm.regressors(p, flat), tm.regressors(p, ramp)
+        if not x1 or any(not np.array_equal(x1[k], x2[k]) for k in x1):
+            return False
+    return True
+
+
+def switch_on_limits(limits: ChamberLimits, k: int) -> ChamberLimits:
+    """One run's limits when the budget is split into ``k`` switch-ons: the duration / k,
+    as many legs and soaks as fit."""
+    run = limits.duration / k
+    soak = min(limits.min_soak, run / 5.0)
+    return dataclasses.replace(limits, duration=run, min_soak=soak,
+                               legs=max(1, min(limits.legs, int((run - limits.dt) // max(soak, 1.0)))))
+
+
+def switch_on_records(limits: ChamberLimits, k: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The records of ``k`` switch-ons: each run the standard cycle of its share."""
+    run = switch_on_limits(limits, k)
+    case = case_temperature(standard_cycle(run).setpoint(run.duration), run)
+    return [(run.grid, case)] * k
+
+
+@dataclass
+class SwitchOnResult:
+    """Λ of the budget split into k switch-ons (k = 1: one standard cycle), each
+    direction; ``best`` the k with the largest sum; ``gain`` its sum over k = 1's."""
+
+    expected: dict[int, dict[str, float]]
+    best: int
+    run_hours: dict[int, float]
+    verify: dict[str, Any] | None = None
+
+    @property
+    def gain(self) -> float:
+        one = sum(self.expected[1].values())
+        return sum(self.expected[self.best].values()) / one if one > 0 else math.inf
+
+
+def separate_switch_ons(r: Rivals, limits: ChamberLimits, *, max_runs: int = MAX_SWITCH_ONS,
+                        min_run: float = MIN_RUN,
+                        progress: Callable[[int], None] | None = None) -> SwitchOnResult:
+    """Λ (each direction, the wrong model refitted jointly over the runs: shared trend,
+    per-run bias and warm-up) of the budget split into k = 1..``max_runs`` switch-ons of
+    at least ``min_run`` s each: what separates two time-only rivals if anything does (a
+    warm-up restarts at every switch-on, a trend does not)."""
+    ks = [k for k in range(1, max_runs + 1) if k == 1 or limits.duration / k >= min_run]
+    out: dict[int, dict[str, float]] = {}
+    for k in ks:
+        recs = switch_on_records(limits, k)
+        lam = {}
+        for truth, fit in ((r.a, r.b), (r.b, r.a)):
+            mt, pt = r.side(truth)
+            mf, pf = r.side(fit)
+            lam[truth] = divergence_runs(mt, pt, mf, pf, recs, limits.dt)
+        out[k] = lam
+        log.info("switch-ons %d: expected LR %s", k, lam)
+        if progress is not None:
+            progress(1)
+    best = max(out, key=lambda k: sum(out[k].values()))
+    return SwitchOnResult(out, best, {k: limits.duration / k / 3600.0 for k in out})

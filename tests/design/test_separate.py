@@ -6,6 +6,7 @@ with the run's own limits."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shlex
 import subprocess
@@ -236,3 +237,126 @@ def test_six_hour_design_separates_temp_lag_from_markov2_fourfold():
                seed=15)
     assert v["designed"]["temp_lag"]["right_wins_lr"] >= 0.9, v
     assert v["designed"]["temp_lag"]["mean_lr"] >= 4 * v["reference"]["temp_lag"]["mean_lr"]
+
+
+# -- time-only rivals (trend / warmup): the budget split into switch-ons ---------------
+
+def test_the_joint_distance_is_the_gls_distance_over_the_runs():
+    """Two runs fitted by the warm-up model with a shared γ and each run's own bias and
+    warm-up amplitude: the stacked Kalman-whitened least squares = the dense GLS with a
+    block-diagonal covariance (the runs independent) and per-run columns."""
+    from gyrostand.core.separation import _joint_distance
+
+    ma, mb = Model.parse("markov,temp,bias,trend"), Model.parse("markov,temp,bias,warmup")
+    pa = {**BASE, "markov.beta": 0.02, "trend.c": 1e-4}
+    pb = {**BASE, "markov.beta": 0.02, "warmup.A": 0.3, "warmup.tau": 200.0}
+    recs, cols, ys, Cs = [], [], [], []
+    for k, n in enumerate((300, 200)):
+        t = np.arange(float(n))
+        s = Samples(t, np.zeros_like(t), 25 + 10 * np.sin(t / (30.0 + 20 * k)), 1.0)
+        s = s.replace(drift=mean_response(ma, pa, s))
+        recs.append(s)
+        ys.append(s.drift)
+        cols.append(mb.regressors(pb, context(s)))
+        Cs.append(_dense_cov(mb, pb, n, 1.0))
+    lin = mb.names_of_kind("linear")
+    per = [lin.index("bias.b"), lin.index("warmup.A")]
+    shared = [j for j in range(len(lin)) if j not in per]
+    X = np.zeros((500, len(shared) + 2 * len(per)))
+    X[:, :len(shared)] = np.vstack([c[:, shared] for c in cols])
+    X[:300, len(shared):len(shared) + 2] = cols[0][:, per]
+    X[300:, len(shared) + 2:] = cols[1][:, per]
+    y = np.concatenate(ys)
+    Ci = np.zeros((500, 500))
+    Ci[:300, :300], Ci[300:, 300:] = np.linalg.inv(Cs[0]), np.linalg.inv(Cs[1])
+    beta = np.linalg.solve(X.T @ Ci @ X, X.T @ Ci @ y)
+    r = y - X @ beta
+    assert _joint_distance(mb, [pb, pb], recs) == pytest.approx(float(r @ Ci @ r), rel=1e-6)
+
+
+def test_k_alike_switch_ons_give_k_times_one_runs_expected_lr():
+    """The same run repeated k times from its own switch-on, the truth alike in each: the
+    joint refit's optimum is every run's own (the sum of k equal functions), so Λ is k ×
+    one run's — with the warm-up's τ refitted per run, and the trend shared (measured:
+    0.385 and 1.16 from the warm-up)."""
+    from gyrostand.core.separation import divergence_runs
+
+    lim = ChamberLimits(0, 50, 1 / 60, 300, 1800, legs=3)
+    case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
+    ma, mb = Model.parse("markov,temp,bias,warmup"), Model.parse("markov,temp,bias,trend")
+    pa = {**BASE, "warmup.A": 0.2, "warmup.tau": 400.0}
+    pb = {**BASE, "trend.c": -5e-5}
+    rec = (lim.grid, case)
+    for truth, fit in (((ma, pa), (mb, pb)), ((mb, pb), (ma, pa))):
+        one = divergence_runs(*truth, *fit, [rec], 1.0)
+        three = divergence_runs(*truth, *fit, [rec] * 3, 1.0)
+        # data from the warm-up: a clear Λ; from the trend: the warm-up's long τ mimics it
+        assert one > 0.2 if truth[0] is ma else one < 1e-3, one
+        assert three == pytest.approx(3 * one, rel=0.02, abs=1e-4), (truth[0], one, three)
+
+
+def test_trend_and_warmup_are_time_only_and_a_split_budget_is_measured():
+    """trend / warmup are named time-only (temp_lag / markov2 not); the budget split into
+    switch-ons gives each split's Λ (measured at 2 h: both directions fall with the split,
+    the per-run bias absorbing each restart's level), and the joint verify of a split design
+    on data from a short warm-up picks the warm-up every time."""
+    from gyrostand.core.separation import (
+        Rivals,
+        divergence_runs,
+        separate_switch_ons,
+        switch_on_records,
+        time_only,
+    )
+
+    lim = ChamberLimits(0, 50, 1 / 60, 600, 2 * 3600, legs=6)
+    case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
+    m = Model.parse("markov,temp,bias")
+    riv = rivals(m, "trend", "warmup", {**BASE, "trend.c": 2e-5}, lim.grid, case, 1.0)
+    assert time_only(riv)
+    lag = rivals(m, "temp_lag", "markov2", {**BASE, "temp_lag.tau": 120.0, "markov2.beta":
+                                            0.002, "markov2.sigma": 0.01}, lim.grid, case, 1.0)
+    assert not time_only(lag)
+    so = separate_switch_ons(riv, lim, max_runs=2, min_run=1800)
+    assert set(so.expected) == {1, 2} and so.run_hours == {1: 2.0, 2: 1.0}
+    one, two = so.expected[1], so.expected[2]
+    assert one == pytest.approx({k: v for k, v in
+                                 separate(riv, lim, starts=1, maxfev=1).reference_expected.items()},
+                                rel=0.05, abs=1e-3)
+    assert two["warmup"] < one["warmup"] and two["trend"] < one["trend"] + 1e-3, so.expected
+    assert so.best == 1 and so.gain == 1.0
+    # a split design's verify: several runs per set, both models fitted jointly
+    short = Rivals("warmup", "trend", riv.model_b, riv.model_a,
+                   {**BASE, "warmup.A": 0.3, "warmup.tau": 300.0}, {**BASE, "trend.c": -2e-5})
+    recs = switch_on_records(dataclasses.replace(lim, duration=3600, legs=3), 2)
+    assert len(recs) == 2 and recs[0][0][-1] == 1800
+    v = verify(short, {"switch-ons": recs}, 3, seed=4)
+    got = v["switch-ons"]["warmup"]
+    lam = divergence_runs(short.model_a, short.params_a, short.model_b, short.params_b,
+                          recs, 1.0)
+    assert got["failed"] == 0 and got["right_wins_lr"] == 1.0, got
+    assert 0.5 * lam <= got["mean_lr"] <= 2 * lam + 2, (got, lam)
+
+
+def test_the_command_says_trend_and_warmup_are_time_only(tmp_path):
+    """``design --separate trend warmup``: the command prints that the rivals are time-only,
+    the table of the budget split into switch-ons and the reachable gain; design.json
+    carries the splits."""
+    out = tmp_path / "d"
+    args = [sys.executable, "-m", "gyrostand", "design", "--model", "markov,temp,bias",
+            *[f"--param={k}={v}" for k, v in {**BASE, "trend.c": 2e-5}.items()],
+            "--separate", "trend", "warmup", "--hours", "2", "--legs", "3",
+            "--evaluations", "3", "--out", str(out)]
+    p = subprocess.run(args, capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr
+    assert "trend and warmup are time-only effects" in p.stdout
+    assert "the reachable gain over the standard cycle is" in p.stdout, p.stdout
+    doc = json.loads((out / "design.json").read_text())
+    so = doc["switch_ons"]
+    assert so["time_only"] is True and [s["runs"] for s in so["splits"]] == [1, 2]
+    assert so["splits"][0]["expected_lr"]["total"] == pytest.approx(
+        doc["expected_lr"]["reference"]["total"], rel=0.05, abs=1e-3)
+    rows = [ln.split() for ln in p.stdout.splitlines() if ln.strip()[:1] in ("1", "2")
+            and len(ln.split()) == 6]
+    assert [r[0] for r in rows] == ["1", "2"], p.stdout
+    assert float(rows[1][4]) == pytest.approx(so["splits"][1]["expected_lr"]["total"],
+                                              rel=1e-3)
