@@ -29,7 +29,8 @@ def run(args: argparse.Namespace) -> int:
     if len(args.run) > 1:
         from ..report.joint import write_joint_report
 
-        print(write_joint_report(subjects_of(args), args.out, format=args.format))
+        print(write_joint_report(subjects_of(args), args.out, format=args.format,
+                                 single_file=args.single_file))
         return 0
     args.run = args.run[0]
     from ..report import write_report  # matplotlib only when a report is asked for

@@ -109,3 +109,15 @@ def test_single_file_embeds_the_figures(runs, tmp_path):
         assert head == "data:image/png;base64"
         assert base64.b64decode(data)[:8] == b"\x89PNG\r\n\x1a\n"
 
+
+
+def test_the_command_passes_single_file_to_the_joint_report(runs, tmp_path, capsys):
+    from gyrostand.cli import main
+
+    out = tmp_path / "cli"
+    assert main(["report", *map(str, runs[:2]), "--model", "markov,temp,bias",
+                 "--single-file", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.strip() == str(out / "report.html")
+    assert {f.name for f in out.iterdir()} == {"report.html"}
+    assert all(i["src"].startswith("data:image/png;base64,")
+               for i in parse(out / "report.html").imgs)
