@@ -36,7 +36,7 @@ import can
 
 from gyrostand.errors import CanEdgeError
 
-__all__ = ["read_log", "read_logs", "LogDamage", "frame_fields", "Frame", "ERROR_FRAME",
+__all__ = ["read_log", "read_logs", "read_log_arrays", "read_logs_arrays", "LogDamage", "frame_fields", "Frame", "ERROR_FRAME",
            "REMOTE_FRAME", "EXTENDED_KEY_BIT", "ReaderProcess"]
 
 log = logging.getLogger("gyrostand.can.logread")  # also when run as __main__
@@ -129,9 +129,12 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
         reader.stop()
 
 
-def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
+def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[Any]:
     """python-can's BLF reader, driven one top-level object at a time: its header and
-    container parsing, with damage skipped instead of ending the file."""
+    container parsing, with damage skipped instead of ending the file. With ``arrays``,
+    each container's frames come as one :class:`~gyrostand.can.blfarray.FrameArrays`
+    (parsed by :func:`~gyrostand.can.blfarray.parse_container`, or by python-can's own
+    parser when that declines), else as :class:`can.Message` objects."""
     from can.io import blf
 
     try:
@@ -203,7 +206,10 @@ def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 reader._tail = b""
                 continue
             try:
-                yield from reader._parse_container(data)
+                if arrays:
+                    yield from _container_arrays(reader, data)
+                else:
+                    yield from reader._parse_container(data)
             except Exception as exc:  # a parse error inside the container's objects
                 damage.containers += 1
                 damage.warn(f"{path}: damaged frames in the container at byte {start}: "
@@ -226,6 +232,64 @@ def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 f.seek(nxt)
     finally:
         reader.stop()
+
+
+def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
+    """The frames of one decompressed container as one FrameArrays: parsed as arrays, or,
+    when :func:`~gyrostand.can.blfarray.parse_container` declines, by python-can's own
+    ``_parse_container`` (the frames it gave before an error are delivered, then the
+    error is raised, as the per-object path delivers them)."""
+    from gyrostand.can.blfarray import FrameArrays, parse_container
+
+    tail = reader._tail
+    got = parse_container(tail + data if tail else data, reader.start_timestamp)
+    if got is not None:
+        frames, reader._tail = got
+        if len(frames):
+            yield frames
+        return
+    out: list[Frame] = []
+    try:
+        out.extend(frame_fields(m) for m in reader._parse_container(data))
+    except Exception:
+        if out:
+            yield FrameArrays.from_frames(out)
+        raise
+    if out:
+        yield FrameArrays.from_frames(out)
+
+
+def read_log_arrays(path: str | Path, damage: LogDamage | None = None,
+                    chunk: int = 4096) -> Iterator[Any]:
+    """:func:`read_log` as :class:`~gyrostand.can.blfarray.FrameArrays` chunks (a BLF
+    container each, or ``chunk`` frames of another format): the same frames, the same
+    damage handling and messages."""
+    path = Path(path)
+    if path.suffix.lower() == ".blf" and path.is_file():
+        yield from _read_blf(path, damage if damage is not None else LogDamage(), True)
+        return
+    from gyrostand.can.blfarray import FrameArrays
+
+    buf: list[Frame] = []
+    try:
+        for msg in read_log(path, damage):
+            buf.append(frame_fields(msg))
+            if len(buf) >= chunk:
+                yield FrameArrays.from_frames(buf)
+                buf = []
+    except Exception:
+        if buf:
+            yield FrameArrays.from_frames(buf)
+        raise
+    if buf:
+        yield FrameArrays.from_frames(buf)
+
+
+def read_logs_arrays(paths: Iterable[str | Path], damage: LogDamage | None = None
+                     ) -> Iterator[Any]:
+    """:func:`read_logs` as FrameArrays chunks (:func:`read_log_arrays`)."""
+    for p in paths:
+        yield from read_log_arrays(p, damage)
 
 
 def _next_object(f: BinaryIO, start: int, chunk: int = 1 << 16) -> int | None:
