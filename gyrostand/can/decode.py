@@ -21,13 +21,17 @@ import threading
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, replace
+from typing import TYPE_CHECKING
 
 import can
 from cantools.database.can import Database
 
 from gyrostand.can.dbc import EXTENDED_KEY_BIT, MessageRef, frame_key, j1939_pgn
-from gyrostand.can.extract import extractor
+from gyrostand.can.extract import array_extractor, extractor
 from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
+
+if TYPE_CHECKING:
+    from gyrostand.can.blfarray import FrameArrays
 from gyrostand.can.routes import ChannelMap, _decoder, _Route
 from gyrostand.can.rxstats import REASONS, Counts, DecodeStats, Rejections
 
@@ -120,6 +124,18 @@ class DecodingListener(can.Listener):
             route = self._route(db, command)
             route.is_command = True
             route.decode = _decoder(route.message)
+        # the array path (receive_arrays): per route of one mapped signal, its extractor
+        # on arrays of payloads (None: that route's frames take the per-frame path)
+        self._array_decode: dict[int, object] = {}
+        for route in self._routes.values():
+            if route.is_command or len(route.extract) != 1:
+                continue
+            _, _, name, _, _, cname, _, _ = route.extract[0]
+            self._array_decode[id(route)] = array_extractor(
+                route.message, [name] + ([cname] if cname else []),
+                ints=[cname] if cname else [])
+        self._table: tuple | None = None
+        self._committing = False
         self.reset_counters()
 
     def _route(self, db: Database, ref: MessageRef) -> _Route:
@@ -188,6 +204,175 @@ class DecodingListener(can.Listener):
         (replay's reader process delivers frames this way). Never raises on a bad frame."""
         with self._lock:
             self._receive(frames)
+
+    def receive_arrays(self, frames: FrameArrays) -> None:
+        """Receive frames given as :class:`~gyrostand.can.blfarray.FrameArrays`, in order,
+        under one lock, with the counts, rejections and samples :meth:`receive_frames`
+        gives for the same frames: the per-frame fast path's rules computed on arrays
+        (:meth:`_receive_arrays`) up to the first frame that leaves it (a frame to hold
+        or reject by time, a command, a multiplexed or J1939-matched id...), and from that
+        frame on, the rest of the batch through the per-frame code."""
+        with self._lock:
+            done = 0
+            if len(frames):
+                self._committing = False
+                try:
+                    done = self._receive_arrays(frames)
+                except Exception as exc:  # a defect here: the per-frame path decides
+                    if self._committing:  # counts already changed: no second go
+                        raise
+                    log.exception("array receive path failed (%s): the batch goes "
+                                  "frame by frame", exc)
+                    done = 0
+            if done < len(frames):
+                self._receive(frames.frames(done))
+
+    def _lookup(self) -> tuple:
+        """(sorted keys, code per key, routes): code >= 0 the route's index, -1 a DBC id not
+        mapped (ignored), -2 a route the array path does not take. Rebuilt when routes
+        were added (J1939 ids cached by :meth:`_pgn_route`)."""
+        if self._table is not None and self._table[3] == len(self._routes):
+            return self._table
+        import numpy as np
+
+        routes: list[_Route] = []
+        codes: dict[int, int] = {k: -1 for k in self._known}
+        for k, r in self._routes.items():
+            if r.is_command or self._array_decode.get(id(r)) is None:
+                codes[k] = -2
+            else:
+                if r not in routes:
+                    routes.append(r)
+                codes[k] = routes.index(r)
+        keys = np.array(sorted(codes), dtype=np.int64)
+        code = np.array([codes[k] for k in sorted(codes)], dtype=np.int64)
+        self._table = (keys, code, routes, len(self._routes))
+        return self._table
+
+    def _receive_arrays(self, fa: FrameArrays) -> int:
+        """The per-frame fast path of :meth:`_receive` on arrays, for the frames before the
+        first one it cannot decide alone; returns how many frames it took (the caller
+        gives the rest to :meth:`_receive`). Counted as there: error and remote frames,
+        unknown and ignored ids, wrong lengths, non-finite timestamps, out-of-range
+        values; accepted as there: a decoded, in-range frame within ``window`` of the
+        anchor (the running maximum of accepted timestamps), at or after its id's
+        previous frame, nothing held, the FIFO not full."""
+        import numpy as np
+
+        keys, code, routes, _ = self._lookup()
+        t, key, flags, length = fa.t, fa.key, fa.flags, fa.length
+        m = len(t)
+        if len(keys):
+            at = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+            c = np.where(keys[at] == key, code[at], -3)  # -3: an id not in the DBC
+        else:
+            c = np.full(m, -3, np.int64)
+        c = np.where(flags != 0, -4, c)  # -4: error / remote frame (counted only)
+        stop = m
+        # frames the array path cannot decide: routes it does not take, unknown ids that
+        # a J1939 PGN match or hint would look at
+        bad = c == -2
+        ext = (key & EXTENDED_KEY_BIT) != 0
+        if self._by_pgn:  # an extended id not routed may be routed by its PGN
+            bad |= ((c == -3) | (c == -1)) & ext
+        elif self._pgn_hint:  # an unknown extended id may be hinted at (logged once)
+            bad |= (c == -3) & ext
+        nz = np.flatnonzero(bad)
+        if len(nz):
+            stop = int(nz[0])
+        # decode, per route, the frames of the right length with a finite timestamp
+        routed = c >= 0
+        rl = np.array([r.length for r in routes], dtype=np.int64)
+        ok_len = np.zeros(m, bool)
+        ok_len[routed] = length[routed] == rl[c[routed]]
+        finite = np.isfinite(t)
+        cand = routed & ok_len & finite
+        value = np.zeros(m)
+        cnt = np.zeros(m, np.int64)
+        lo = np.zeros(len(routes))
+        hi = np.zeros(len(routes))
+        for i, r in enumerate(routes):
+            sel = np.flatnonzero(cand & (c == i))
+            _, _, name, lo[i], hi[i], cname, _, _ = r.extract[0]
+            if not len(sel):
+                continue
+            got = self._array_decode[id(r)](fa.data[sel])  # type: ignore[operator]
+            value[sel] = got[name]
+            if cname:
+                cnt[sel] = got[cname]
+        in_range = np.zeros(m, bool)
+        in_range[cand] = (lo[c[cand]] <= value[cand]) & (value[cand] <= hi[c[cand]])
+        acc = cand & in_range
+        acc[stop:] = False
+        # timing, in order: the anchor before each accepted frame is the running maximum
+        ia = np.flatnonzero(acc)
+        a0 = self._anchor
+        if len(ia):
+            ta = t[ia]
+            prev_max = np.maximum.accumulate(np.concatenate(([a0], ta)))[:-1]
+            w = self.window
+            ok = (prev_max - w <= ta) & (ta <= prev_max + w)
+            ra = c[ia]
+            order = np.argsort(ra, kind="stable")
+            rs, ts = ra[order], ta[order]
+            first = np.ones(len(rs), bool)
+            first[1:] = rs[1:] != rs[:-1]
+            prev_t = np.empty(len(rs))
+            prev_t[1:] = ts[:-1]
+            last = np.array([r.last_t for r in routes])
+            prev_t[first] = last[rs[first]]
+            mono = np.empty(len(rs), bool)
+            mono[order] = ts >= prev_t
+            ok &= mono
+            room = self.capacity - len(self._buf)
+            if self._held:
+                room = 0
+            ok[max(room, 0):] = False
+            fail = np.flatnonzero(~ok)
+            if len(fail):
+                stop = min(stop, int(ia[fail[0]]))
+                ia = ia[:fail[0]]
+        # everything before ``stop`` is decided here
+        self._committing = True
+        cs = c[:stop]
+        n, rej = self._n, self._rej
+        n.received += stop
+        fl = flags[:stop]
+        nerr = int(np.count_nonzero(fl & ERROR_FRAME))
+        n.bus_errors += nerr
+        rej.error_frame += nerr
+        rej.remote_frame += int(np.count_nonzero(fl != 0)) - nerr
+        n.ignored += int(np.count_nonzero(cs == -1))
+        rej.unknown_id += int(np.count_nonzero(cs == -3))
+        rt = cs >= 0
+        rej.wrong_dlc += int(np.count_nonzero(rt & ~ok_len[:stop]))
+        rej.bad_timestamp += int(np.count_nonzero(rt & ok_len[:stop] & ~finite[:stop]))
+        rej.out_of_range += int(np.count_nonzero(cand[:stop] & ~in_range[:stop]))
+        if not len(ia):
+            return stop
+        # accepted: samples in frame order, anchors, per-id last times, rolling counters
+        ta, ra = t[ia], c[ia]
+        self._anchor = max(a0, float(ta.max()))
+        ri = ra.tolist()
+        for i in set(ri):
+            r = routes[i]
+            mine = ra == i
+            r.last_t = float(ta[mine][-1])
+            _, _, _, _, _, cname, mod, ckey = r.extract[0]
+            if cname:
+                cv = cnt[ia[mine]]
+                prev = self._last_counter.get(ckey)
+                steps = np.diff(cv) if prev is None else np.diff(cv, prepend=prev)
+                n.counter_jumps += int(np.count_nonzero(steps % mod != 1 % mod))
+                self._last_counter[ckey] = int(cv[-1])
+        gs = [routes[i].extract[0][0] for i in range(len(routes))]
+        chs = [routes[i].extract[0][1] for i in range(len(routes))]
+        self._buf.extend(zip([gs[i] for i in ri], [chs[i] for i in ri],
+                             (ta + self._offset).tolist(), value[ia].tolist(),
+                             strict=True))
+        n.decoded += len(ia)
+        n.samples += len(ia)
+        return stop
 
     def _receive(self, frames: Iterable[Frame]) -> None:
         """The receive path, for one frame or a batch (the caller holds the lock). State
