@@ -11,7 +11,13 @@ folder), then, in this one process:
   default for a log this size, python-can's reader runs in a reader process
   (``gyrostand.can.logread``) while this process decodes, bins and estimates;
 * the same pipeline with the log parsed in this process (``--reader inline``), for
-  comparison.
+  comparison;
+* the array path, what ``gyrostand replay`` now does by default for a BLF: containers
+  parsed as arrays (``gyrostand.can.blfarray``), mapped signals extracted as arrays and
+  the listener's rules applied to whole batches (``DecodingListener.receive_arrays``),
+  in this process (stretch anchor: >= 2 x bare). The two lines above are the per-frame
+  path (``GYROSTAND_PER_FRAME=1``), as measured before the array path existed; the
+  bins are byte-identical either way (tests/can/test_array_path.py).
 
 * an independent script of the same job: ``can.LogReader`` + cantools'
   ``Database.decode_message`` + a dict of 1-s bin sums (anchor: the pipeline in
@@ -33,6 +39,7 @@ from __future__ import annotations
 import argparse
 import copy
 import logging
+import os
 import resource
 import tempfile
 import time
@@ -106,9 +113,11 @@ def bare(path: Path) -> tuple[int, float]:
     return n, time.perf_counter() - t
 
 
-def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None
-             ) -> tuple[float, float, float, dict]:
-    """(streaming s, final-fit s, CPU s of streaming incl. the reader process, stats)."""
+def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None,
+             arrays: bool = False) -> tuple[float, float, float, dict]:
+    """(streaming s, final-fit s, CPU s of streaming incl. the reader process, stats);
+    the per-frame path unless ``arrays``."""
+    os.environ["GYROSTAND_PER_FRAME"] = "0" if arrays else "1"
     marks: dict[str, float] = {}
     finish = offline.Pipeline.finish
 
@@ -146,8 +155,8 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
         n = write_log(path, simulated_frames(cfg))
         print(f"generated {n} frames into {path} in {time.perf_counter() - t:.1f} s")
     logging.getLogger("gyrostand").setLevel(logging.ERROR)
-    best_bare = best_stream = best_inline = best_indep = float("inf")
-    fit_s = cpu_s = 0.0
+    best_bare = best_stream = best_inline = best_indep = best_arr = float("inf")
+    fit_s = cpu_s = cpu_arr = 0.0
     n = 0
     stats: dict = {}
     for _ in range(repeat):  # interleaved, best of R (the machine is shared)
@@ -158,8 +167,14 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
             best_stream, cpu_s = ts, cpu
         best_inline = min(best_inline, pipeline(cfg, path, out, parallel=False)[0])
         best_indep = min(best_indep, independent(cfg, path))
+        ta, _, cpu, stats_arr = pipeline(cfg, path, out, arrays=True)
+        if ta < best_arr:
+            best_arr, cpu_arr = ta, cpu
+        if stats_arr["decoder"] != stats["decoder"] or stats_arr["binner"] != stats["binner"]:
+            raise SystemExit("the array path's counts differ from the per-frame path's")
     dec = stats["decoder"]
-    print(f"layout {layout}: {cfg.dbc_path.name}")
+    print(f"layout {layout}: {cfg.dbc_path.name}; load average "
+          + " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" on {os.cpu_count()} CPUs")
     print(f"file: {path.name}, {n} frames, {path.stat().st_size / 1e6:.1f} MB")
     print(f"bare can.LogReader:  {n / best_bare:10,.0f} frames/s ({best_bare:.2f} s)")
     print(f"pipeline (replay):   {n / best_stream:10,.0f} frames/s ({best_stream:.2f} s); "
@@ -175,6 +190,11 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
           "(anchor <= 0.80)")
     print(f"log parsed inline:   {n / best_inline:10,.0f} frames/s ({best_inline:.2f} s), "
           f"ratio {best_bare / best_inline:.2f} (one core)")
+    print(f"array path (default):{n / best_arr:10,.0f} frames/s ({best_arr:.2f} s); CPU "
+          f"{cpu_arr:.2f} s ({cpu_arr / n * 1e6:.2f} us/frame), one process")
+    print(f"ratio array path/bare: {best_bare / best_arr:.2f}  (stretch anchor >= 2.00); "
+          f"vs the independent script {best_arr / best_indep:.2f} (<= 0.80); "
+          f"incl. final fits {best_bare / (best_arr + fit_s):.2f}")
 
 
 def main() -> None:

@@ -353,6 +353,8 @@ class DecodingListener(can.Listener):
         nsamp = np.zeros(m, np.int64)
         # per route: its frames, and per mapped signal (present, value, counter...)
         per_route: dict[int, tuple] = {}
+        single_routes: dict[int, bool] = {}
+        value1 = np.zeros(m)
         for i, r in enumerate(routes):
             sel = np.flatnonzero(cand & (c == i))
             if not len(sel):
@@ -368,6 +370,10 @@ class DecodingListener(can.Listener):
             oor[sel] = bad_v & ~und
             nsamp[sel] = ns
             per_route[i] = (sel, cols)
+            # one mapped signal, present in every frame: its value per frame
+            single_routes[i] = len(cols) == 1 and bool(cols[0][0].all())
+            if single_routes[i]:
+                value1[sel] = cols[0][1]
         ign = cand & ~undec & ~oor & (nsamp == 0)
         acc = cand & ~undec & ~oor & (nsamp > 0)
         # timing, in order: the anchor before each accepted frame is the running maximum
@@ -421,6 +427,7 @@ class DecodingListener(can.Listener):
         taken[ia] = True
         offset = self._offset
         pos_l, ent_l, g_l, c_l, v_l = [], [], [], [], []
+        single = all(one for one in single_routes.values())
         for i, (sel, cols) in per_route.items():
             mine = taken[sel]
             if not mine.any():
@@ -440,21 +447,32 @@ class DecodingListener(can.Listener):
                         steps = np.diff(cv) if prev is None else np.diff(cv, prepend=prev)
                         n.counter_jumps += int(np.count_nonzero(steps % mod != 1 % mod))
                         self._last_counter[ckey] = int(cv[-1])
+                if single:
+                    continue
                 pos_l.append(fr[pm])
                 ent_l.append(np.full(int(pm.sum()), e))
                 g_l.append(np.full(int(pm.sum()), g))
                 c_l.append(np.full(int(pm.sum()), ch))
                 v_l.append(value[mine][pm])
         self._anchor = max(a0, float(t[ia].max()))
-        pos, ent = np.concatenate(pos_l), np.concatenate(ent_l)
-        order = np.lexsort((ent, pos))  # frame order, then the route's extract order
-        pos = pos[order]
-        self._buf.extend(zip(np.concatenate(g_l)[order].tolist(),
-                             np.concatenate(c_l)[order].tolist(),
-                             (t[pos] + offset).tolist(),
-                             np.concatenate(v_l)[order].tolist(), strict=True))
+        if single:  # one sample per accepted frame: frame order as it is
+            ra = c[ia]
+            gt = np.array([r.extract[0][0] for r in routes], np.int64)
+            ct = np.array([r.extract[0][1] for r in routes], np.int64)
+            samples = zip(gt[ra].tolist(), ct[ra].tolist(), (t[ia] + offset).tolist(),
+                          value1[ia].tolist(), strict=True)
+            count = len(ia)
+        else:
+            pos, ent = np.concatenate(pos_l), np.concatenate(ent_l)
+            order = np.lexsort((ent, pos))  # frame order, then the route's extract order
+            pos = pos[order]
+            samples = zip(np.concatenate(g_l)[order].tolist(),
+                          np.concatenate(c_l)[order].tolist(), (t[pos] + offset).tolist(),
+                          np.concatenate(v_l)[order].tolist(), strict=True)
+            count = len(pos)
+        self._buf.extend(samples)
         n.decoded += len(ia)
-        n.samples += len(pos)
+        n.samples += count
         return stop
 
     def _receive(self, frames: Iterable[Frame]) -> None:
