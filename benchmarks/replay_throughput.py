@@ -139,6 +139,26 @@ def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None,
             outcome.stats)
 
 
+def ingest_only(cfg, path: Path, arrays: bool) -> tuple[float, list]:
+    """(s, bins) of the receive path alone, as the pipeline builds it: read, decode,
+    check, time and bin (gyrostand.can.replay.replay into an Ingest), nothing estimated
+    or written; the array path or the per-frame one (log parsed in this process)."""
+    from gyrostand.can.binning import Binner
+    from gyrostand.can.decode import ChannelMap, DecodingListener
+    from gyrostand.can.ingest import Ingest
+    from gyrostand.can.replay import replay
+
+    cm = ChannelMap.from_config(cfg)
+    lst = DecodingListener(cfg.db, cm, capacity=cfg.sampling.buffer,
+                           command=cfg.responses.command, max_gap=cfg.sampling.max_gap,
+                           dt=cfg.sampling.dt)
+    ing = Ingest(lst, Binner(cm.gyros, cfg.sampling.dt, cfg.sampling.epoch,
+                             cfg.sampling.max_gap))
+    t = time.perf_counter()
+    bins = [b for batch in replay(path, ing, parallel=False, arrays=arrays) for b in batch]
+    return time.perf_counter() - t, bins
+
+
 def _cpu() -> float:
     """CPU s of this process and its waited-for children."""
     a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -156,6 +176,7 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
         print(f"generated {n} frames into {path} in {time.perf_counter() - t:.1f} s")
     logging.getLogger("gyrostand").setLevel(logging.ERROR)
     best_bare = best_stream = best_inline = best_indep = best_arr = float("inf")
+    best_ing = best_ing_pf = float("inf")
     fit_s = cpu_s = cpu_arr = 0.0
     n = 0
     stats: dict = {}
@@ -172,6 +193,12 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
             best_arr, cpu_arr = ta, cpu
         if stats_arr["decoder"] != stats["decoder"] or stats_arr["binner"] != stats["binner"]:
             raise SystemExit("the array path's counts differ from the per-frame path's")
+        ti, bins_arr = ingest_only(cfg, path, True)
+        best_ing = min(best_ing, ti)
+        ti, bins_pf = ingest_only(cfg, path, False)
+        best_ing_pf = min(best_ing_pf, ti)
+        if repr(bins_arr) != repr(bins_pf):
+            raise SystemExit("the array path's bins differ from the per-frame path's")
     dec = stats["decoder"]
     print(f"layout {layout}: {cfg.dbc_path.name}; load average "
           + " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" on {os.cpu_count()} CPUs")
@@ -195,6 +222,10 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
     print(f"ratio array path/bare: {best_bare / best_arr:.2f}  (stretch anchor >= 2.00); "
           f"vs the independent script {best_arr / best_indep:.2f} (<= 0.80); "
           f"incl. final fits {best_bare / (best_arr + fit_s):.2f}")
+    print(f"receive path alone (read, decode, check, bin; no estimators, no files): "
+          f"arrays {best_ing:.2f} s = {best_bare / best_ing:.2f} x bare (stretch >= 2.00); "
+          f"per-frame inline {best_ing_pf:.2f} s = {best_bare / best_ing_pf:.2f} x bare; "
+          "bins identical")
 
 
 def main() -> None:

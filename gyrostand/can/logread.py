@@ -13,8 +13,13 @@ other. The consumer gives each batch to
 :meth:`~gyrostand.can.decode.DecodingListener.receive_frames`, which runs the very steps
 ``on_message_received`` runs for a live frame.
 
-This module imports python-can but not cantools (nor numpy), so the reader process starts
-quickly.
+:func:`read_log_arrays` gives the same frames as
+:class:`~gyrostand.can.blfarray.FrameArrays` chunks (a BLF's containers parsed whole as
+arrays, with the same damage handling); the reader process sends such batches with
+``--arrays``.
+
+This module imports python-can but not cantools (numpy only for the arrays, when used),
+so the reader process starts quickly.
 """
 
 from __future__ import annotations

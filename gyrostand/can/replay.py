@@ -6,10 +6,16 @@ and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the bin
 run gave. All timing comes from frame timestamps; ``realtime=True`` only paces delivery
 (sleeping to frame time / ``speed``), it never changes the data.
 
-Log files replayed as fast as possible are parsed in a reader process
+Log files replayed as fast as possible are read as arrays: a BLF's containers parsed
+whole (:mod:`gyrostand.can.blfarray`), batches of frames received by
+:meth:`~gyrostand.can.decode.DecodingListener.receive_arrays`, which applies the
+per-frame path's rules to whole batches and hands the frames it cannot decide alone to
+the per-frame code. Other formats are parsed in a reader process
 (:class:`~gyrostand.can.logread.ReaderProcess`) while this process decodes, bins and
-estimates: the frames reach the listener's per-frame steps in the same order and the
-pumps fall after the same frames, so the bins are identical either way (tested).
+estimates. ``GYROSTAND_PER_FRAME=1`` forces the per-frame path (frames as tuples, or
+messages). Either way the frames reach the listener in the same order and the pumps
+fall after the same frames, so the bins, counts and rejections are identical (tested:
+tests/can/test_array_path.py).
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ import filecmp
 import math
 import random
 import struct
+from pathlib import Path
 
 import can
 import cantools
@@ -321,3 +322,27 @@ def test_replay_of_an_asc_log_and_several_files(tmp_path, monkeypatch):
         a = _replay(DEMO, [asc, blf], tmp_path, monkeypatch, True, parallel)
         b = _replay(DEMO, [asc, blf], tmp_path, monkeypatch, False, parallel)
         _compare(a, b)
+
+
+def test_cli_replay_per_frame_gives_the_same_run(tmp_path, monkeypatch, capsys):
+    import json
+    import os
+
+    from gyrostand.cli import main
+
+    monkeypatch.delenv("GYROSTAND_PER_FRAME", raising=False)
+    log = _log(TRIAD, tmp_path / "t.blf", _frames(TRIAD, n=60, seed=12, drop=0.01))
+    results = []
+    for extra in ([], ["--per-frame"]):
+        assert main(["replay", str(TRIAD.path), str(log), "--out",
+                     str(tmp_path / f"r{len(extra)}"), *extra]) == 0
+        out = capsys.readouterr().out
+        results.append(Path(next(line.split(None, 1)[1] for line in out.splitlines()
+                                 if line.startswith("result:"))))
+    assert os.environ.get("GYROSTAND_PER_FRAME") == "1"  # set by --per-frame
+    monkeypatch.delenv("GYROSTAND_PER_FRAME")
+    a, b = (json.loads(p.read_text()) for p in results)
+    assert a["stats"]["decoder"] == b["stats"]["decoder"]
+    for g in ("x", "y", "z"):
+        assert (results[0].parent / g / "samples.csv").read_bytes() == \
+            (results[1].parent / g / "samples.csv").read_bytes()
