@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -123,7 +124,7 @@ def _header(buf: bytes, pos: int) -> tuple[int, int, int, int]:
             int.from_bytes(buf[pos + 12:pos + 16], "little"))
 
 
-def _view(buf: bytes, pos: int, m: int, stride: int, fields: dict[str, tuple[str, int]],
+def _view(buf: bytes, pos: int, m: int, stride: int, fields: dict[str, tuple[Any, int]],
           itemsize: int) -> np.ndarray:
     dt = np.dtype({"names": list(fields), "formats": [f for f, _ in fields.values()],
                    "offsets": [o for _, o in fields.values()], "itemsize": itemsize})
@@ -153,7 +154,7 @@ def _run(buf: bytes, pos: int, size: int, stride: int, n: int) -> int:
 def _parse_run(buf: bytes, pos: int, r: int, stride: int, size: int, hsize: int,
                version: int, otype: int, start: float) -> FrameArrays | None:
     body = 16 + _VHEAD[version]
-    f = {"tflags": ("<u4", 16), "ticks": ("<u8", 24)}
+    f: dict[str, tuple[Any, int]] = {"tflags": ("<u4", 16), "ticks": ("<u8", 24)}
     if otype in (CAN_MESSAGE, CAN_MESSAGE2):
         f |= {"mflags": ("u1", body + 2), "dlc": ("u1", body + 3), "id": ("<u4", body + 4),
               "data": (("u1", 8), body + 8)}
