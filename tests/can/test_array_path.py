@@ -346,3 +346,28 @@ def test_cli_replay_per_frame_gives_the_same_run(tmp_path, monkeypatch, capsys):
     for g in ("x", "y", "z"):
         assert (results[0].parent / g / "samples.csv").read_bytes() == \
             (results[1].parent / g / "samples.csv").read_bytes()
+
+
+def test_reader_process_sends_the_same_frames_as_arrays(tmp_path):
+    from gyrostand.can.logread import ReaderProcess
+    from gyrostand.errors import CanEdgeError
+
+    path = _log(TRIAD, tmp_path / "r.blf", _frames(TRIAD, n=40, seed=13), container=3000)
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 3:len(raw) // 3 + 60] = bytes(60)
+    bad = tmp_path / "bad.blf"
+    bad.write_bytes(bytes(raw[:-50]))
+    for p in (path, bad):
+        tuples = ReaderProcess([p], batch=333)
+        want = [(struct.pack("<d", t), k, f, bytes(d)) for b in tuples for t, k, f, d in b]
+        arrays = ReaderProcess([p], batch=333, arrays=True)
+        batches = list(arrays)
+        assert all(isinstance(b, FrameArrays) for b in batches)
+        assert [len(b) for b in batches[:-1]] == [333] * (len(batches) - 1)
+        got = [(struct.pack("<d", t), k, f, d) for b in batches for t, k, f, d in b.frames()]
+        assert got == want and len(got) > 1000
+        assert arrays.damage.as_dict() == tuples.damage.as_dict()
+        assert arrays.frames == tuples.frames == len(want)
+        assert (tuples.damage.total > 0) == (p is bad)
+    with pytest.raises(CanEdgeError, match=r"nope\.blf: log file not found"):
+        list(ReaderProcess([tmp_path / "nope.blf"], arrays=True))
