@@ -11,7 +11,13 @@ folder), then, in this one process:
   default for a log this size, python-can's reader runs in a reader process
   (``gyrostand.can.logread``) while this process decodes, bins and estimates;
 * the same pipeline with the log parsed in this process (``--reader inline``), for
-  comparison.
+  comparison;
+* the array path, what ``gyrostand replay`` now does by default for a BLF: containers
+  parsed as arrays (``gyrostand.can.blfarray``), mapped signals extracted as arrays and
+  the listener's rules applied to whole batches (``DecodingListener.receive_arrays``),
+  in this process (stretch anchor: >= 2 x bare). The two lines above are the per-frame
+  path (``GYROSTAND_PER_FRAME=1``), as measured before the array path existed; the
+  bins are byte-identical either way (tests/can/test_array_path.py).
 
 * an independent script of the same job: ``can.LogReader`` + cantools'
   ``Database.decode_message`` + a dict of 1-s bin sums (anchor: the pipeline in
@@ -33,6 +39,7 @@ from __future__ import annotations
 import argparse
 import copy
 import logging
+import os
 import resource
 import tempfile
 import time
@@ -100,15 +107,19 @@ def independent(cfg, path: Path) -> float:
 
 def bare(path: Path) -> tuple[int, float]:
     t = time.perf_counter()
+    c = time.process_time()
     n = 0
     for _ in can.LogReader(path):
         n += 1
+    bare.cpu = min(getattr(bare, "cpu", float("inf")), time.process_time() - c)  # type: ignore[attr-defined]
     return n, time.perf_counter() - t
 
 
-def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None
-             ) -> tuple[float, float, float, dict]:
-    """(streaming s, final-fit s, CPU s of streaming incl. the reader process, stats)."""
+def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None,
+             arrays: bool = False) -> tuple[float, float, float, dict]:
+    """(streaming s, final-fit s, CPU s of streaming incl. the reader process, stats);
+    the per-frame path unless ``arrays``."""
+    os.environ["GYROSTAND_PER_FRAME"] = "0" if arrays else "1"
     marks: dict[str, float] = {}
     finish = offline.Pipeline.finish
 
@@ -130,6 +141,26 @@ def pipeline(cfg, path: Path, out: Path, parallel: bool | None = None
             outcome.stats)
 
 
+def ingest_only(cfg, path: Path, arrays: bool) -> tuple[float, list]:
+    """(s, bins) of the receive path alone, as the pipeline builds it: read, decode,
+    check, time and bin (gyrostand.can.replay.replay into an Ingest), nothing estimated
+    or written; the array path or the per-frame one (log parsed in this process)."""
+    from gyrostand.can.binning import Binner
+    from gyrostand.can.decode import ChannelMap, DecodingListener
+    from gyrostand.can.ingest import Ingest
+    from gyrostand.can.replay import replay
+
+    cm = ChannelMap.from_config(cfg)
+    lst = DecodingListener(cfg.db, cm, capacity=cfg.sampling.buffer,
+                           command=cfg.responses.command, max_gap=cfg.sampling.max_gap,
+                           dt=cfg.sampling.dt)
+    ing = Ingest(lst, Binner(cm.gyros, cfg.sampling.dt, cfg.sampling.epoch,
+                             cfg.sampling.max_gap))
+    t = time.perf_counter()
+    bins = [b for batch in replay(path, ing, parallel=False, arrays=arrays) for b in batch]
+    return time.perf_counter() - t, bins
+
+
 def _cpu() -> float:
     """CPU s of this process and its waited-for children."""
     a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -137,6 +168,7 @@ def _cpu() -> float:
 
 
 def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
+    bare.cpu = float("inf")  # type: ignore[attr-defined]
     tmp = Path(tempfile.gettempdir())
     cfg = triad_cfg(frames, out, layout)
     suffix = "" if layout == "ours" else f"_{layout}"
@@ -146,8 +178,9 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
         n = write_log(path, simulated_frames(cfg))
         print(f"generated {n} frames into {path} in {time.perf_counter() - t:.1f} s")
     logging.getLogger("gyrostand").setLevel(logging.ERROR)
-    best_bare = best_stream = best_inline = best_indep = float("inf")
-    fit_s = cpu_s = 0.0
+    best_bare = best_stream = best_inline = best_indep = best_arr = float("inf")
+    best_ing = best_ing_pf = float("inf")
+    fit_s = cpu_s = cpu_arr = 0.0
     n = 0
     stats: dict = {}
     for _ in range(repeat):  # interleaved, best of R (the machine is shared)
@@ -158,8 +191,20 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
             best_stream, cpu_s = ts, cpu
         best_inline = min(best_inline, pipeline(cfg, path, out, parallel=False)[0])
         best_indep = min(best_indep, independent(cfg, path))
+        ta, _, cpu, stats_arr = pipeline(cfg, path, out, arrays=True)
+        if ta < best_arr:
+            best_arr, cpu_arr = ta, cpu
+        if stats_arr["decoder"] != stats["decoder"] or stats_arr["binner"] != stats["binner"]:
+            raise SystemExit("the array path's counts differ from the per-frame path's")
+        ti, bins_arr = ingest_only(cfg, path, True)
+        best_ing = min(best_ing, ti)
+        ti, bins_pf = ingest_only(cfg, path, False)
+        best_ing_pf = min(best_ing_pf, ti)
+        if repr(bins_arr) != repr(bins_pf):
+            raise SystemExit("the array path's bins differ from the per-frame path's")
     dec = stats["decoder"]
-    print(f"layout {layout}: {cfg.dbc_path.name}")
+    print(f"layout {layout}: {cfg.dbc_path.name}; load average "
+          + " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" on {os.cpu_count()} CPUs")
     print(f"file: {path.name}, {n} frames, {path.stat().st_size / 1e6:.1f} MB")
     print(f"bare can.LogReader:  {n / best_bare:10,.0f} frames/s ({best_bare:.2f} s)")
     print(f"pipeline (replay):   {n / best_stream:10,.0f} frames/s ({best_stream:.2f} s); "
@@ -175,6 +220,18 @@ def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
           "(anchor <= 0.80)")
     print(f"log parsed inline:   {n / best_inline:10,.0f} frames/s ({best_inline:.2f} s), "
           f"ratio {best_bare / best_inline:.2f} (one core)")
+    print(f"array path (default):{n / best_arr:10,.0f} frames/s ({best_arr:.2f} s); CPU "
+          f"{cpu_arr:.2f} s ({cpu_arr / n * 1e6:.2f} us/frame), one process")
+    print(f"ratio array path/bare: {best_bare / best_arr:.2f}  (stretch anchor >= 2.00); "
+          f"vs the independent script {best_arr / best_indep:.2f} (<= 0.80); "
+          f"incl. final fits {best_bare / (best_arr + fit_s):.2f}")
+    print(f"by CPU time (less sensitive to a shared machine's load): bare "
+          f"{bare.cpu:.2f} s, array path {cpu_arr:.2f} s: "  # type: ignore[attr-defined]
+          f"{bare.cpu / cpu_arr:.2f} x bare")  # type: ignore[attr-defined]
+    print(f"receive path alone (read, decode, check, bin; no estimators, no files): "
+          f"arrays {best_ing:.2f} s = {best_bare / best_ing:.2f} x bare (stretch >= 2.00); "
+          f"per-frame inline {best_ing_pf:.2f} s = {best_bare / best_ing_pf:.2f} x bare; "
+          "bins identical")
 
 
 def main() -> None:

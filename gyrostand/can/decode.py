@@ -21,13 +21,17 @@ import threading
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, replace
+from typing import TYPE_CHECKING
 
 import can
 from cantools.database.can import Database
 
 from gyrostand.can.dbc import EXTENDED_KEY_BIT, MessageRef, frame_key, j1939_pgn
-from gyrostand.can.extract import extractor
+from gyrostand.can.extract import array_extractor, extractor
 from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
+
+if TYPE_CHECKING:
+    from gyrostand.can.blfarray import FrameArrays
 from gyrostand.can.routes import ChannelMap, _decoder, _Route
 from gyrostand.can.rxstats import REASONS, Counts, DecodeStats, Rejections
 
@@ -120,6 +124,18 @@ class DecodingListener(can.Listener):
             route = self._route(db, command)
             route.is_command = True
             route.decode = _decoder(route.message)
+        # the array path (receive_arrays): per data route, its mapped signals and
+        # counters extracted from arrays of payloads (None: decoded frame by frame with
+        # the route's own decoder, e.g. a multiplexed message)
+        self._array_decode: dict[int, object] = {}
+        for route in self._routes.values():
+            if route.is_command:
+                continue
+            cnames = [x[5] for x in route.extract if x[5]]
+            self._array_decode[id(route)] = array_extractor(
+                route.message, [x[2] for x in route.extract] + cnames, ints=cnames)
+        self._table: tuple | None = None
+        self._committing = False
         self.reset_counters()
 
     def _route(self, db: Database, ref: MessageRef) -> _Route:
@@ -188,6 +204,276 @@ class DecodingListener(can.Listener):
         (replay's reader process delivers frames this way). Never raises on a bad frame."""
         with self._lock:
             self._receive(frames)
+
+    def receive_arrays(self, frames: FrameArrays) -> None:
+        """Receive frames given as :class:`~gyrostand.can.blfarray.FrameArrays`, in order,
+        under one lock, with the counts, rejections and samples :meth:`receive_frames`
+        gives for the same frames: the per-frame fast path's rules computed on arrays
+        (:meth:`_receive_arrays`) up to the first frame that leaves it (a frame to hold
+        or reject by time, a command, a multiplexed or J1939-matched id...); that frame
+        and the next few (16, more when the array path keeps stopping soon) go through
+        the per-frame code, then the array path takes over again from the state the
+        per-frame code left."""
+        m = len(frames)
+        pos, per = 0, 16
+        with self._lock:
+            while pos < m:
+                self._committing = False
+                try:
+                    done = self._receive_arrays(frames[pos:] if pos else frames)
+                except Exception as exc:  # a defect here: the per-frame path decides
+                    if self._committing:  # counts already changed: no second go
+                        raise
+                    log.exception("array receive path failed (%s): the batch goes "
+                                  "frame by frame", exc)
+                    self._receive(frames.frames(pos))
+                    return
+                pos += done
+                if pos >= m:
+                    return
+                # the frame that left the array path, and a few after it, frame by frame;
+                # then the array path again (state is written back after each step)
+                end = min(m, pos + per)
+                self._receive(frames.frames(pos, end))
+                pos = end
+                if done < per:  # the array path does not pay off here: longer steps
+                    per *= 4
+
+    def _lookup(self) -> tuple:
+        """(sorted keys, code per key, routes): code >= 0 the route's index, -1 a DBC id not
+        mapped (ignored), -2 a route the array path does not take (a command). Rebuilt
+        when routes were added (J1939 ids cached by :meth:`_pgn_route`)."""
+        if self._table is not None and self._table[3] == len(self._routes):
+            return self._table
+        import numpy as np
+
+        routes: list[_Route] = []
+        codes: dict[int, int] = {k: -1 for k in self._known}
+        for k, r in self._routes.items():
+            if r.is_command:
+                codes[k] = -2
+            else:
+                if r not in routes:
+                    routes.append(r)
+                codes[k] = routes.index(r)
+        keys = np.array(sorted(codes), dtype=np.int64)
+        code = np.array([codes[k] for k in sorted(codes)], dtype=np.int64)
+        self._table = (keys, code, routes, len(self._routes))
+        return self._table
+
+    def _route_values(self, r: _Route, data, np) -> tuple:
+        """Per mapped signal of route ``r`` (in its extract order), for payloads ``data``
+        (n x w): (present, value, counter present, counter), and the frames that did not
+        decode. Array-extracted when the route has an array extractor, else decoded
+        frame by frame by the route's decoder (what the per-frame path runs)."""
+        n = len(data)
+        dec = self._array_decode.get(id(r))
+        out = []
+        if dec is not None:
+            got = dec(data)  # type: ignore[operator]
+            yes = np.ones(n, bool)
+            for _, _, name, _, _, cname, _, _ in r.extract:
+                out.append((yes, got[name], yes if cname else ~yes,
+                            got[cname] if cname else np.zeros(n, np.int64)))
+            return out, ~yes
+        raw = np.ascontiguousarray(data[:, :r.length]).tobytes()
+        length, decode = r.length, r.decode
+        rows = []
+        undec = np.zeros(n, bool)
+        for j in range(n):
+            try:
+                rows.append(decode(raw[j * length:(j + 1) * length]))
+            except Exception:
+                rows.append({})
+                undec[j] = True
+        for _, _, name, _, _, cname, _, _ in r.extract:
+            vals = [row.get(name) for row in rows]
+            present = np.array([v is not None for v in vals], bool)
+            value = np.array([float(v) if v is not None else 0.0 for v in vals])
+            cvs = [row.get(cname) if cname else None for row in rows]
+            cp = np.array([v is not None for v in cvs], bool)
+            cnt = np.array([int(v) if v is not None else 0 for v in cvs], np.int64)
+            out.append((present, value, cp, cnt))
+        return out, undec
+
+    def _receive_arrays(self, fa: FrameArrays) -> int:
+        """The per-frame path of :meth:`_receive` on arrays, for the frames before the
+        first one it cannot decide alone; returns how many frames it took (the caller
+        gives the next ones to :meth:`_receive`). Counted as there: error and remote
+        frames, unknown and ignored ids, wrong lengths, non-finite timestamps,
+        undecodable payloads, out-of-range values, frames without a selected signal;
+        accepted as there: a decoded, in-range frame within ``window`` of the anchor
+        (the running maximum of accepted timestamps), at or after its id's previous
+        frame, nothing held, its samples fitting in the FIFO."""
+        import numpy as np
+
+        keys, code, routes, _ = self._lookup()
+        t, key, flags, length = fa.t, fa.key, fa.flags, fa.length
+        m = len(t)
+        if len(keys):
+            at = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+            c = np.where(keys[at] == key, code[at], -3)  # -3: an id not in the DBC
+        else:
+            c = np.full(m, -3, np.int64)
+        c = np.where(flags != 0, -4, c)  # -4: error / remote frame (counted only)
+        stop = m
+        # frames the array path cannot decide: commands, and extended ids not routed that
+        # a hint would name (logged once per id, in order, by the per-frame code)
+        bad = c == -2
+        if self._by_pgn or self._pgn_hint:
+            ext = (key & EXTENDED_KEY_BIT) != 0
+            odd = ((c == -3) | (c == -1)) & ext
+            if odd.any():
+                routed_now = len(self._routes)
+                hint: list[int] = []
+                for k in np.unique(key[odd]).tolist():
+                    pgn = j1939_pgn(k & ~EXTENDED_KEY_BIT)
+                    if pgn in self._by_pgn:
+                        if self._pgn_route(k) is not None and k not in self._routes:
+                            hint.append(k)  # routed but not cached (MAX_ROUTES)
+                    elif (k not in self._known and pgn in self._pgn_hint
+                          and k not in self._hinted and len(self._hinted) < 64):
+                        hint.append(k)
+                if len(self._routes) != routed_now:  # J1939 ids routed: look up again
+                    return self._receive_arrays(fa)
+                if hint:
+                    bad |= np.isin(key, hint)
+        nz = np.flatnonzero(bad)
+        if len(nz):
+            stop = int(nz[0])
+        routed = c >= 0
+        rl = np.array([r.length for r in routes], dtype=np.int64)
+        ok_len = np.zeros(m, bool)
+        ok_len[routed] = length[routed] == rl[c[routed]]
+        finite = np.isfinite(t)
+        cand = routed & ok_len & finite
+        cand[stop:] = False
+        undec = np.zeros(m, bool)
+        oor = np.zeros(m, bool)
+        nsamp = np.zeros(m, np.int64)
+        # per route: its frames, and per mapped signal (present, value, counter...)
+        per_route: dict[int, tuple] = {}
+        single_routes: dict[int, bool] = {}
+        value1 = np.zeros(m)
+        for i, r in enumerate(routes):
+            sel = np.flatnonzero(cand & (c == i))
+            if not len(sel):
+                continue
+            cols, und = self._route_values(r, fa.data[sel], np)
+            undec[sel] = und
+            bad_v = np.zeros(len(sel), bool)
+            ns = np.zeros(len(sel), np.int64)
+            for (present, value, _, _), x in zip(cols, r.extract, strict=True):
+                lo, hi = x[3], x[4]
+                bad_v |= present & ~((lo <= value) & (value <= hi))  # NaN: out of range
+                ns += present
+            oor[sel] = bad_v & ~und
+            nsamp[sel] = ns
+            per_route[i] = (sel, cols)
+            # one mapped signal, present in every frame: its value per frame
+            single_routes[i] = len(cols) == 1 and bool(cols[0][0].all())
+            if single_routes[i]:
+                value1[sel] = cols[0][1]
+        ign = cand & ~undec & ~oor & (nsamp == 0)
+        acc = cand & ~undec & ~oor & (nsamp > 0)
+        # timing, in order: the anchor before each accepted frame is the running maximum
+        ia = np.flatnonzero(acc)
+        a0 = self._anchor
+        if len(ia):
+            ta = t[ia]
+            prev_max = np.maximum.accumulate(np.concatenate(([a0], ta)))[:-1]
+            w = self.window
+            ok = (prev_max - w <= ta) & (ta <= prev_max + w)
+            ra = c[ia]
+            order = np.argsort(ra, kind="stable")
+            rs, ts = ra[order], ta[order]
+            first = np.ones(len(rs), bool)
+            first[1:] = rs[1:] != rs[:-1]
+            prev_t = np.empty(len(rs))
+            prev_t[1:] = ts[:-1]
+            last = np.array([r.last_t for r in routes])
+            prev_t[first] = last[rs[first]]
+            mono = np.empty(len(rs), bool)
+            mono[order] = ts >= prev_t
+            ok &= mono
+            ok &= len(self._buf) + np.cumsum(nsamp[ia]) <= self.capacity
+            if self._held:
+                ok[:] = False
+            fail = np.flatnonzero(~ok)
+            if len(fail):
+                stop = min(stop, int(ia[fail[0]]))
+                ia = ia[:fail[0]]
+        # everything before ``stop`` is decided here
+        self._committing = True
+        cs = c[:stop]
+        n, rej = self._n, self._rej
+        n.received += stop
+        fl = flags[:stop]
+        nerr = int(np.count_nonzero(fl & ERROR_FRAME))
+        n.bus_errors += nerr
+        rej.error_frame += nerr
+        rej.remote_frame += int(np.count_nonzero(fl != 0)) - nerr
+        n.ignored += int(np.count_nonzero(cs == -1)) + int(np.count_nonzero(ign[:stop]))
+        rej.unknown_id += int(np.count_nonzero(cs == -3))
+        rt = cs >= 0
+        rej.wrong_dlc += int(np.count_nonzero(rt & ~ok_len[:stop]))
+        rej.bad_timestamp += int(np.count_nonzero(rt & ok_len[:stop] & ~finite[:stop]))
+        rej.undecodable += int(np.count_nonzero(undec[:stop]))
+        rej.out_of_range += int(np.count_nonzero(oor[:stop]))
+        if not len(ia):
+            return stop
+        # accepted: per-id last times, the anchor, rolling counters, samples in order
+        taken = np.zeros(m, bool)
+        taken[ia] = True
+        offset = self._offset
+        pos_l, ent_l, g_l, c_l, v_l = [], [], [], [], []
+        single = all(one for one in single_routes.values())
+        for i, (sel, cols) in per_route.items():
+            mine = taken[sel]
+            if not mine.any():
+                continue
+            r = routes[i]
+            fr = sel[mine]
+            r.last_t = float(t[fr[-1]])
+            for e, ((present, value, cp, cnt), x) in enumerate(
+                    zip(cols, r.extract, strict=True)):
+                g, ch, _, _, _, cname, mod, ckey = x
+                pm = present[mine]
+                if cname:
+                    use = pm & cp[mine]
+                    cv = cnt[mine][use]
+                    if len(cv):
+                        prev = self._last_counter.get(ckey)
+                        steps = np.diff(cv) if prev is None else np.diff(cv, prepend=prev)
+                        n.counter_jumps += int(np.count_nonzero(steps % mod != 1 % mod))
+                        self._last_counter[ckey] = int(cv[-1])
+                if single:
+                    continue
+                pos_l.append(fr[pm])
+                ent_l.append(np.full(int(pm.sum()), e))
+                g_l.append(np.full(int(pm.sum()), g))
+                c_l.append(np.full(int(pm.sum()), ch))
+                v_l.append(value[mine][pm])
+        self._anchor = max(a0, float(t[ia].max()))
+        if single:  # one sample per accepted frame: frame order as it is
+            ra = c[ia]
+            gt = np.array([r.extract[0][0] for r in routes], np.int64)
+            ct = np.array([r.extract[0][1] for r in routes], np.int64)
+            samples = zip(gt[ra].tolist(), ct[ra].tolist(), (t[ia] + offset).tolist(),
+                          value1[ia].tolist(), strict=True)
+            count = len(ia)
+        else:
+            pos, ent = np.concatenate(pos_l), np.concatenate(ent_l)
+            order = np.lexsort((ent, pos))  # frame order, then the route's extract order
+            pos = pos[order]
+            samples = zip(np.concatenate(g_l)[order].tolist(),
+                          np.concatenate(c_l)[order].tolist(), (t[pos] + offset).tolist(),
+                          np.concatenate(v_l)[order].tolist(), strict=True)
+            count = len(pos)
+        self._buf.extend(samples)
+        n.decoded += len(ia)
+        n.samples += count
+        return stop
 
     def _receive(self, frames: Iterable[Frame]) -> None:
         """The receive path, for one frame or a batch (the caller holds the lock). State

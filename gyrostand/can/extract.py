@@ -28,7 +28,7 @@ import struct
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["extractor", "agrees_with_cantools"]
+__all__ = ["extractor", "agrees_with_cantools", "array_extractor", "agrees_with_cantools_arrays"]
 
 #: random payloads checked against cantools when an extractor is built (plus 3 probes)
 CHECKS = 64
@@ -142,4 +142,151 @@ def agrees_with_cantools(message, decode: Decode, names: Sequence[str],
             a, b = got.get(name), want.get(name)
             if type(a) is not type(b) or not (a == b or (a != a and b != b)):
                 return False
+    return True
+
+
+# -- the same extractors on arrays of payloads (the vectorized replay path) -------------
+
+ArrayDecode = Callable[[Any], dict]
+
+
+def _array_signal(signal, nbytes: int, as_int: bool):
+    """``f(nl, nb) -> array`` of one signal from the payloads as uint64 arrays (little-
+    and big-endian integers of the ``nbytes`` bytes): float64 values as ``float(v)`` of
+    cantools' ``v`` would be, or int64 ``int(v)`` (``as_int``, integer conversions only);
+    None when the signal is outside this scheme."""
+    import numpy as np
+
+    L = int(signal.length)
+    if L <= 0 or L > 64 or signal.multiplexer_ids or signal.is_multiplexer:
+        return None
+    conv = signal.conversion
+    if type(conv).__name__ == "NamedSignalConversion":  # decode_choices=False: its linear part
+        conv = getattr(conv, "_conversion", None)
+    kind = type(conv).__name__
+    if kind not in ("IdentityConversion", "LinearIntegerConversion", "LinearConversion"):
+        return None
+    is_float = bool(getattr(conv, "is_float", False))
+    if is_float and L not in (32, 64):
+        return None
+    if signal.byte_order == "little_endian":
+        shift, big = int(signal.start), False
+    else:
+        shift, big = 8 * nbytes - _start_bit(signal) - L, True
+    if shift < 0 or shift + L > 8 * nbytes:
+        return None
+    scale, offset = getattr(conv, "scale", 1), getattr(conv, "offset", 0)
+    if kind == "IdentityConversion":
+        scale, offset = 1, 0
+    int_scale = isinstance(scale, int) and not is_float
+    if as_int and not (int_scale and isinstance(offset, int)):
+        return None  # int() of a float value: left to cantools
+    signed = bool(signal.is_signed) and not is_float
+    if not is_float and L == 64 and not signed:
+        return None  # a uint64 beyond int64: left to the per-frame extractor
+    if int_scale:  # raw * scale (+ offset) in exact integers: they must fit in int64
+        top = (1 << (L - 1 if signed else L)) * abs(scale) + abs(int(offset))
+        if top >= 1 << 62:
+            return None
+    mask = np.uint64((1 << L) - 1) if L < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
+    sh = np.uint64(shift)
+
+    def f(nl, nb):
+        raw = ((nb if big else nl) >> sh) & mask
+        if is_float:
+            x = (raw.astype(np.uint32).view(np.float32).astype(np.float64) if L == 32
+                 else raw.view(np.float64))
+            x = x * scale + offset if kind != "IdentityConversion" else x
+            return x.astype(np.int64) if as_int else x
+        r = raw.astype(np.int64) if L < 64 else raw.view(np.int64)
+        if signed and L < 64:
+            r = np.where(r >> (L - 1), r - (1 << L), r)
+        if int_scale:
+            y = r * scale if scale != 1 else r
+            if isinstance(offset, int):
+                y = y + offset if offset else y
+                return y if as_int else y.astype(np.float64)
+            return y.astype(np.float64) + offset
+        return r.astype(np.float64) * scale + offset
+
+    return f
+
+
+def array_extractor(message, names: Sequence[str], ints: Sequence[str] = ()
+                    ) -> ArrayDecode | None:
+    """``decode(data) -> {name: array}`` of the signals ``names`` of a cantools
+    ``message`` for an ``n x w`` uint8 array of payloads of the message's length (w >=
+    length, bytes past the length zero): float64 ``float(v)`` of each cantools value
+    ``v``, or int64 ``int(v)`` for the names in ``ints`` (rolling counters). None when a
+    signal is outside the scheme (multiplexed, wider than 64 bits, a float counter...) or
+    the result differs from cantools on a check payload (:func:`agrees_with_cantools_arrays`)."""
+    import numpy as np
+
+    if getattr(message, "is_container", False) or message.is_multiplexed() or not names:
+        return None
+    nbytes = int(message.length)
+    if not 0 < nbytes <= 8:
+        return None
+    by_name = {s.name: s for s in message.signals}
+    fns = {}
+    for name in dict.fromkeys(names):
+        sig = by_name.get(name)
+        if sig is None:
+            return None
+        fn = _array_signal(sig, nbytes, name in ints)
+        if fn is None:
+            return None
+        fns[name] = fn
+    down = np.uint64(8 * (8 - nbytes))
+
+    def decode(data):
+        d = np.ascontiguousarray(data[:, :8])
+        if d.shape[1] < 8:
+            d = np.pad(d, ((0, 0), (0, 8 - d.shape[1])))
+        nl = d.view("<u8").ravel()
+        nb = nl.byteswap() >> down
+        return {name: fn(nl, nb) for name, fn in fns.items()}
+
+    if not agrees_with_cantools_arrays(message, decode, list(fns), set(ints)):
+        return None
+    return decode
+
+
+def agrees_with_cantools_arrays(message, decode: ArrayDecode, names: Sequence[str],
+                                ints: set[str] | frozenset[str] = frozenset(),
+                                n: int = CHECKS, seed: int = 0x6A5) -> bool:
+    """True when ``decode`` gives, for every name, ``float(v)`` (``int(v)`` for ``ints``)
+    of cantools' value ``v``, to the bit, on the all-0, all-1 and counting payloads and
+    on ``n`` random ones (as :func:`agrees_with_cantools` for the per-frame extractors)."""
+    import numpy as np
+
+    rng = random.Random(seed)
+    length = int(message.length)
+    probes = [bytes(length), b"\xff" * length, bytes(range(1, length + 1))]
+    probes += [bytes(rng.getrandbits(8) for _ in range(length)) for _ in range(n)]
+    wants, kept = [], []
+    for data in probes:
+        try:
+            wants.append(message.decode_simple(data, False))
+        except Exception:
+            continue  # e.g. a payload cantools refuses: not a comparison
+        kept.append(data)
+    if not kept:
+        return False
+    arr = np.frombuffer(b"".join(p.ljust(8, b"\0") for p in kept),
+                        dtype=np.uint8).reshape(len(kept), -1)
+    got = decode(arr)
+    for name in names:
+        col = got[name]
+        for i, want in enumerate(wants):
+            w = want.get(name)
+            if w is None:
+                return False
+            if name in ints:
+                if col.dtype != np.int64 or int(col[i]) != int(w):
+                    return False
+            else:
+                a, b = float(col[i]), float(w)
+                if col.dtype != np.float64 or struct.pack("<d", a) != struct.pack("<d", b):
+                    return False
     return True

@@ -13,8 +13,13 @@ other. The consumer gives each batch to
 :meth:`~gyrostand.can.decode.DecodingListener.receive_frames`, which runs the very steps
 ``on_message_received`` runs for a live frame.
 
-This module imports python-can but not cantools (nor numpy), so the reader process starts
-quickly.
+:func:`read_log_arrays` gives the same frames as
+:class:`~gyrostand.can.blfarray.FrameArrays` chunks (a BLF's containers parsed whole as
+arrays, with the same damage handling); the reader process sends such batches with
+``--arrays``.
+
+This module imports python-can but not cantools (numpy only for the arrays, when used),
+so the reader process starts quickly.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import can
 
 from gyrostand.errors import CanEdgeError
 
-__all__ = ["read_log", "read_logs", "LogDamage", "frame_fields", "Frame", "ERROR_FRAME",
+__all__ = ["read_log", "read_logs", "read_log_arrays", "read_logs_arrays", "LogDamage", "frame_fields", "Frame", "ERROR_FRAME",
            "REMOTE_FRAME", "EXTENDED_KEY_BIT", "ReaderProcess"]
 
 log = logging.getLogger("gyrostand.can.logread")  # also when run as __main__
@@ -129,9 +134,12 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
         reader.stop()
 
 
-def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
+def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[Any]:
     """python-can's BLF reader, driven one top-level object at a time: its header and
-    container parsing, with damage skipped instead of ending the file."""
+    container parsing, with damage skipped instead of ending the file. With ``arrays``,
+    each container's frames come as one :class:`~gyrostand.can.blfarray.FrameArrays`
+    (parsed by :func:`~gyrostand.can.blfarray.parse_container`, or by python-can's own
+    parser when that declines), else as :class:`can.Message` objects."""
     from can.io import blf
 
     try:
@@ -203,7 +211,10 @@ def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 reader._tail = b""
                 continue
             try:
-                yield from reader._parse_container(data)
+                if arrays:
+                    yield from _container_arrays(reader, data)
+                else:
+                    yield from reader._parse_container(data)
             except Exception as exc:  # a parse error inside the container's objects
                 damage.containers += 1
                 damage.warn(f"{path}: damaged frames in the container at byte {start}: "
@@ -226,6 +237,64 @@ def _read_blf(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 f.seek(nxt)
     finally:
         reader.stop()
+
+
+def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
+    """The frames of one decompressed container as one FrameArrays: parsed as arrays, or,
+    when :func:`~gyrostand.can.blfarray.parse_container` declines, by python-can's own
+    ``_parse_container`` (the frames it gave before an error are delivered, then the
+    error is raised, as the per-object path delivers them)."""
+    from gyrostand.can.blfarray import FrameArrays, parse_container
+
+    tail = reader._tail
+    got = parse_container(tail + data if tail else data, reader.start_timestamp)
+    if got is not None:
+        frames, reader._tail = got
+        if len(frames):
+            yield frames
+        return
+    out: list[Frame] = []
+    try:
+        out.extend(frame_fields(m) for m in reader._parse_container(data))
+    except Exception:
+        if out:
+            yield FrameArrays.from_frames(out)
+        raise
+    if out:
+        yield FrameArrays.from_frames(out)
+
+
+def read_log_arrays(path: str | Path, damage: LogDamage | None = None,
+                    chunk: int = 4096) -> Iterator[Any]:
+    """:func:`read_log` as :class:`~gyrostand.can.blfarray.FrameArrays` chunks (a BLF
+    container each, or ``chunk`` frames of another format): the same frames, the same
+    damage handling and messages."""
+    path = Path(path)
+    if path.suffix.lower() == ".blf" and path.is_file():
+        yield from _read_blf(path, damage if damage is not None else LogDamage(), True)
+        return
+    from gyrostand.can.blfarray import FrameArrays
+
+    buf: list[Frame] = []
+    try:
+        for msg in read_log(path, damage):
+            buf.append(frame_fields(msg))
+            if len(buf) >= chunk:
+                yield FrameArrays.from_frames(buf)
+                buf = []
+    except Exception:
+        if buf:
+            yield FrameArrays.from_frames(buf)
+        raise
+    if buf:
+        yield FrameArrays.from_frames(buf)
+
+
+def read_logs_arrays(paths: Iterable[str | Path], damage: LogDamage | None = None
+                     ) -> Iterator[Any]:
+    """:func:`read_logs` as FrameArrays chunks (:func:`read_log_arrays`)."""
+    for p in paths:
+        yield from read_log_arrays(p, damage)
 
 
 def _next_object(f: BinaryIO, start: int, chunk: int = 1 << 16) -> int | None:
@@ -309,6 +378,7 @@ def read_logs(paths: Iterable[str | Path], damage: LogDamage | None = None
 # -- the reader process -------------------------------------------------------------------
 # ``python -m gyrostand.can.logread [--batch N] LOG...`` writes messages to its standard
 # output, each an 8-byte little-endian length and a pickle: ("frames", [Frame, ...]) |
+# ("arrays", FrameArrays) (with --arrays) |
 # ("log", level, logger, text) | ("damage", LogDamage.as_dict()) | ("error", text) |
 # ("end", frame count). A separate
 # interpreter started this way imports python-can and this module only (~0.1 s), where a
@@ -338,13 +408,42 @@ class _PipeHandler(logging.Handler):
             pass
 
 
-def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
-    """Body of the reader process: read ``paths`` in order, send frame batches, then end.
-    An error is sent after every frame read before it, as the in-process reader would
-    have delivered them."""
+def array_batches(parts: Iterable[Any], batch: int) -> Iterator[Any]:
+    """FrameArrays ``parts`` regrouped into batches of exactly ``batch`` frames (the last
+    one shorter); an error raised by ``parts`` comes after the frames read before it."""
+    from gyrostand.can.blfarray import FrameArrays
+
+    pending: list[Any] = []
+    have = 0
+    try:
+        for part in parts:
+            pending.append(part)
+            have += len(part)
+            while have >= batch:
+                whole = FrameArrays.concat(pending)
+                yield whole[:batch]
+                rest = whole[batch:]
+                pending, have = ([rest] if len(rest) else []), len(rest)
+    except Exception:
+        if have:
+            yield FrameArrays.concat(pending)
+        raise
+    if have:
+        yield FrameArrays.concat(pending)
+
+
+def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int, arrays: bool = False
+                 ) -> None:
+    """Body of the reader process: read ``paths`` in order, send frame batches (lists of
+    :data:`Frame` tuples, or with ``arrays`` FrameArrays), then end. An error is sent
+    after every frame read before it, as the in-process reader would have delivered
+    them."""
     root = logging.getLogger("gyrostand")
     root.addHandler(_PipeHandler(out))
     root.setLevel(logging.INFO)
+    if arrays:
+        _reader_arrays(paths, out, batch)
+        return
     n = 0
     buf: list[Frame] = []
     append = buf.append
@@ -378,6 +477,26 @@ def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
     _send(out, ("end", n))
 
 
+def _reader_arrays(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
+    """:func:`_reader_main` sending FrameArrays batches (:func:`array_batches`)."""
+    n = 0
+    damage = LogDamage()
+    try:
+        for frames in array_batches(read_logs_arrays(paths, damage), batch):
+            _send(out, ("arrays", frames))
+            n += len(frames)
+    except (BrokenPipeError, ConnectionResetError):
+        raise
+    except Exception as exc:
+        error = str(exc) if isinstance(exc, CanEdgeError) else (
+            f"{' + '.join(paths)}: cannot read CAN log: {type(exc).__name__}: {exc}")
+        _send(out, ("damage", damage.as_dict()))
+        _send(out, ("error", error))
+        return
+    _send(out, ("damage", damage.as_dict()))
+    _send(out, ("end", n))
+
+
 def _deepen(fd: int, size: int = 1 << 20) -> None:
     """Let the pipe hold many batches (Linux: F_SETPIPE_SZ, up to pipe-max-size): with the
     default 64 KiB about one batch fits, and reader and consumer wait on each other."""
@@ -391,7 +510,9 @@ def _deepen(fd: int, size: int = 1 << 20) -> None:
 
 class ReaderProcess:
     """Read logs in a separate process; iterate to get their frames in batches of
-    ``batch`` :data:`Frame` tuples (the last one shorter), in file order.
+    ``batch`` :data:`Frame` tuples (the last one shorter), in file order; with ``arrays``
+    each batch is a :class:`~gyrostand.can.blfarray.FrameArrays` (BLF containers parsed
+    as arrays in the reader: :func:`read_log_arrays`).
 
     Errors the reader meets are raised here as :class:`CanEdgeError` naming the file,
     after the batches read before them; its log records are logged here. Leaving the
@@ -399,16 +520,18 @@ class ReaderProcess:
     blocks while the pipe is full.
     """
 
-    def __init__(self, paths: Sequence[str | Path], batch: int = 1024) -> None:
+    def __init__(self, paths: Sequence[str | Path], batch: int = 1024,
+                 arrays: bool = False) -> None:
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch!r}")
         self.paths = [str(p) for p in paths]
         self.batch = int(batch)
+        self.arrays = bool(arrays)
         self.frames = 0  # frames delivered so far
         self.damage = LogDamage()  # what the reader skipped (complete once iterated)
         self.returncode: int | None = None  # the process's exit code, once it has ended
 
-    def __iter__(self) -> Iterator[list[Frame]]:
+    def __iter__(self) -> Iterator[Any]:
         what = " + ".join(self.paths)
         # the child imports this very gyrostand, installed or not (a source checkout)
         env = dict(os.environ)
@@ -417,7 +540,7 @@ class ReaderProcess:
                                                       if env.get("PYTHONPATH") else []))
         proc = subprocess.Popen(
             [sys.executable, "-m", "gyrostand.can.logread", "--batch", str(self.batch),
-             "--", *self.paths],
+             *(["--arrays"] if self.arrays else []), "--", *self.paths],
             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, env=env)
         assert proc.stdout is not None
         _deepen(proc.stdout.fileno())
@@ -433,7 +556,7 @@ class ReaderProcess:
                                        f"finishing (exit code {code})")
                 msg = pickle.loads(body)
                 kind = msg[0]
-                if kind == "frames":
+                if kind in ("frames", "arrays"):
                     self.frames += len(msg[1])
                     yield msg[1]
                 elif kind == "damage":
@@ -460,6 +583,8 @@ def _main(argv: Sequence[str]) -> int:
                                  description="Send the frames of CAN logs to standard "
                                              "output (gyrostand's replay reader process).")
     ap.add_argument("--batch", type=int, default=1024)
+    ap.add_argument("--arrays", action="store_true",
+                    help="send FrameArrays batches (BLF containers parsed as arrays)")
     ap.add_argument("logs", nargs="+")
     args = ap.parse_args(argv)
     out = sys.stdout.buffer
@@ -469,7 +594,7 @@ def _main(argv: Sequence[str]) -> int:
     if out.isatty():
         ap.error("standard output is a terminal; this is gyrostand's replay reader")
     try:
-        _reader_main(args.logs, out, max(1, args.batch))
+        _reader_main(args.logs, out, max(1, args.batch), args.arrays)
     except (BrokenPipeError, ConnectionResetError):
         os._exit(0)  # the consumer stopped reading: nothing more to say, nor to flush
     return 0

@@ -6,10 +6,16 @@ and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the bin
 run gave. All timing comes from frame timestamps; ``realtime=True`` only paces delivery
 (sleeping to frame time / ``speed``), it never changes the data.
 
-Log files replayed as fast as possible are parsed in a reader process
+Log files replayed as fast as possible are read as arrays: a BLF's containers parsed
+whole (:mod:`gyrostand.can.blfarray`), batches of frames received by
+:meth:`~gyrostand.can.decode.DecodingListener.receive_arrays`, which applies the
+per-frame path's rules to whole batches and hands the frames it cannot decide alone to
+the per-frame code. Other formats are parsed in a reader process
 (:class:`~gyrostand.can.logread.ReaderProcess`) while this process decodes, bins and
-estimates: the frames reach the listener's per-frame steps in the same order and the
-pumps fall after the same frames, so the bins are identical either way (tested).
+estimates. ``GYROSTAND_PER_FRAME=1`` forces the per-frame path (frames as tuples, or
+messages). Either way the frames reach the listener in the same order and the pumps
+fall after the same frames, so the bins, counts and rejections are identical (tested:
+tests/can/test_array_path.py).
 """
 
 from __future__ import annotations
@@ -24,9 +30,17 @@ import can
 
 from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
-from gyrostand.can.logread import LogDamage, ReaderProcess, read_log, read_logs
+from gyrostand.can.logread import (
+    LogDamage,
+    ReaderProcess,
+    array_batches,
+    read_log,
+    read_logs,
+    read_logs_arrays,
+)
 
-__all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage"]
+__all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage",
+           "per_frame_forced"]
 
 #: log files (in total) at least this large are parsed in a reader process when
 #: ``parallel`` is None; below it the process start (~0.2 s) is not worth it
@@ -52,11 +66,18 @@ def paced(messages: Iterable[can.Message], speed: float = 1.0,
         yield msg
 
 
+def per_frame_forced() -> bool:
+    """True when ``GYROSTAND_PER_FRAME`` is set (not "" or "0"): replays of log files
+    take the per-frame path (frames as tuples or messages) instead of the array path,
+    e.g. to compare the two (they give the same counts and byte-identical bins)."""
+    return os.environ.get("GYROSTAND_PER_FRAME", "") not in ("", "0")
+
+
 def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
            ingest: Ingest, listeners: Sequence[can.Listener] = (), *,
            realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
-           parallel: bool | None = None, damage: LogDamage | None = None
-           ) -> Iterator[list[Bin]]:
+           parallel: bool | None = None, damage: LogDamage | None = None,
+           arrays: bool | None = None) -> Iterator[list[Bin]]:
     """Feed frames (or the frames of a log file, or of several read one after the other)
     to ``ingest.listener`` and ``listeners``; yield the bins that close, batch by batch,
     and at the end the flushed last bins.
@@ -66,8 +87,14 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     overflows it, whatever ``sampling.buffer`` is. ``parallel``: parse log files in a
     reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
     process may use two CPUs or more; never with ``realtime`` or extra ``listeners``,
-    which take :class:`can.Message` objects). ``damage`` receives what reading the
-    log files skipped (:class:`~gyrostand.can.logread.LogDamage`).
+    which take :class:`can.Message` objects; None also when every file is a BLF read as
+    ``arrays``, whose parse is cheaper than a process). ``damage`` receives what reading the
+    log files skipped (:class:`~gyrostand.can.logread.LogDamage`). ``arrays``: log
+    files are read as arrays (BLF containers parsed whole,
+    :func:`~gyrostand.can.logread.read_log_arrays`) and received through
+    :meth:`~gyrostand.can.decode.DecodingListener.receive_arrays`, in this process or the
+    reader process (None: unless :func:`per_frame_forced`; never with ``realtime`` or
+    extra ``listeners``); the bins, counts and rejections are the same either way.
     """
     damage = damage if damage is not None else LogDamage()
     # back-pressure: pump before the listener's FIFO can overflow (a replay never drops)
@@ -78,10 +105,17 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     elif isinstance(messages, (list, tuple)) and messages and all(
             isinstance(p, (str, Path)) for p in messages):
         paths = [Path(p) for p in messages]
-    if paths is not None and not realtime and not listeners and parallel is not False:
-        if parallel or (_cores() >= 2 and sum(p.stat().st_size for p in paths if p.is_file())
-                        >= PARALLEL_MIN_BYTES):
-            yield from _replay_parallel(paths, ingest, pump_every, damage)
+    vector = not per_frame_forced() if arrays is None else bool(arrays)
+    if paths is not None and not realtime and not listeners:
+        # BLF read as arrays costs ~0.1 us a frame: a reader process would cost more
+        # (its start, the pipe) than it saves; other formats still pay off in one
+        blf_arrays = vector and all(p.suffix.lower() == ".blf" for p in paths)
+        if parallel or (parallel is None and not blf_arrays and _cores() >= 2 and sum(
+                p.stat().st_size for p in paths if p.is_file()) >= PARALLEL_MIN_BYTES):
+            yield from _replay_parallel(paths, ingest, pump_every, damage, vector)
+            return
+        if vector:
+            yield from _replay_arrays(paths, ingest, pump_every, damage)
             return
     frames: Iterable[can.Message] = (read_logs(paths, damage) if paths is not None
                                      else messages)  # type: ignore[assignment]
@@ -112,12 +146,32 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+def _replay_arrays(paths: list[Path], ingest: Ingest, pump_every: int,
+                   damage: LogDamage) -> Iterator[list[Bin]]:
+    """:func:`replay` of log files read as arrays in this process: batches of
+    ``pump_every`` frames, each received then pumped, as the serial loop pumps."""
+    receive, pump = ingest.listener.receive_arrays, ingest.pump
+    n = 0
+    for frames in array_batches(read_logs_arrays(paths, damage), pump_every):
+        receive(frames)
+        n += len(frames)
+        if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
+            bins = pump()
+            if bins:
+                yield bins
+    bins = ingest.finish()
+    if bins:
+        yield bins
+    log.info("replayed %d frames (read as arrays)", n)
+
+
 def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int,
-                     damage: LogDamage) -> Iterator[list[Bin]]:
+                     damage: LogDamage, arrays: bool = False) -> Iterator[list[Bin]]:
     """:func:`replay` of log files parsed by a reader process: batches of ``pump_every``
     frames, each received then pumped, as the serial loop pumps every ``pump_every``."""
-    reader = ReaderProcess(paths, batch=pump_every)
-    receive, pump = ingest.listener.receive_frames, ingest.pump
+    reader = ReaderProcess(paths, batch=pump_every, arrays=arrays)
+    receive = ingest.listener.receive_arrays if arrays else ingest.listener.receive_frames
+    pump = ingest.pump
     try:
         for frames in reader:
             receive(frames)

@@ -1,5 +1,5 @@
 """``gyrostand replay CONFIG LOG [LOG ...] [--out DIR] [--realtime] [--speed X]
-[--reader auto|process|inline]``; a LOG that is a run folder stands for its raw segments
+[--reader auto|process|inline] [--per-frame]``; a LOG that is a run folder stands for its raw segments
 (``raw.blf``, ``raw-2.blf``, ...). Logs that continue each other make one run; a log of
 another switch-on (frames more than ``sampling.max_gap`` after the previous log's end, or
 before it: e.g. days apart) starts its own run folder
@@ -42,7 +42,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--reader", choices=("auto", "process", "inline"), default="auto",
                    help="where the log is parsed: 'process', a reader process beside the "
                         "decoding (uses a second core); 'inline', in this process; 'auto' "
-                        "(default): a process for logs of 1 MiB or more with 2+ CPUs, unless --realtime")
+                        "(default): BLF logs are read as arrays in this process, other logs "
+                        "of 1 MiB or more in a process with 2+ CPUs, unless --realtime")
+    p.add_argument("--per-frame", action="store_true",
+                   help="decode frame by frame instead of whole BLF containers as arrays "
+                        "(slower; the same bins and counts: for comparison; also "
+                        "GYROSTAND_PER_FRAME=1)")
     add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
@@ -56,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
     from .common import emit
 
     cfg = with_data_formats(load_config(args.config), args)
+    if args.per_frame:  # read by gyrostand.can.replay.per_frame_forced() in this process
+        import os
+
+        os.environ["GYROSTAND_PER_FRAME"] = "1"
     groups: list[list[Path]] = []
     for item in args.log:
         p = Path(item)

@@ -222,6 +222,15 @@ def test_replay_auto_uses_a_reader_process_for_large_logs_with_two_cores(
     monkeypatch.setattr(replay_mod, "_cores", lambda: cores)
     monkeypatch.setattr(replay_mod, "PARALLEL_MIN_BYTES", size_limit)
     with caplog.at_level(logging.INFO, logger="gyrostand.can.replay"):
-        bins = [b for batch in replay(path, make_ingest(demo_cfg)) for b in batch]
+        bins = [b for batch in replay(path, make_ingest(demo_cfg), arrays=False)
+                for b in batch]
     assert len(bins) >= 5
     assert ("log parsed in a reader process" in caplog.text) == expect
+    # a BLF read as arrays is parsed here whatever its size (cheaper than a process)
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="gyrostand.can.replay"):
+        again = [b for batch in replay(path, make_ingest(demo_cfg), arrays=True)
+                 for b in batch]
+    assert again == bins
+    assert "log parsed in a reader process" not in caplog.text
+    assert "read as arrays" in caplog.text
