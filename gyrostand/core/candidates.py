@@ -391,9 +391,12 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
 
 
 def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
-            ) -> list[tuple[FitResult | None, GyrostandError | None, float]]:
+            ) -> list[tuple[FitResult | None, GyrostandError | None, float,
+                            tuple[float, ...]]]:
     """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
-    that stopped it, seconds it took), in the order of ``terms``.
+    that stopped it, seconds it took, the curvatures of its shape's range — ``()`` for a
+    candidate without a calibrated shape, :func:`shape_curvatures`), in the order of
+    ``terms``.
 
     The refits are independent, so they run on a thread per CPU (at most
     :data:`MAX_THREADS`): most of their time is in the compiled Kalman filter, which
@@ -403,12 +406,18 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
     number of threads. BLAS is held to one thread around the pool (the algebra is on
     tiny matrices; see :func:`~gyrostand.core.ml.ml`).
     """
-    def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float]:
+    def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float,
+                                tuple[float, ...]]:
         t0 = time.perf_counter()
         try:
-            return refit(samples, model.add(term), base), None, time.perf_counter() - t0
+            r = refit(samples, model.add(term), base)
         except GyrostandError as exc:
-            return None, exc, time.perf_counter() - t0
+            return None, exc, time.perf_counter() - t0, ()
+        seconds = time.perf_counter() - t0
+        lkc: tuple[float, ...] = ()
+        if not isinstance(samples, tuple) and shape_params(model.add(term), term):
+            lkc = shape_curvatures(samples, model, base, term)
+        return r, None, seconds, lkc
 
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     # in a worker thread (a Dask task: the batch runs one run per core already) one
@@ -437,8 +446,8 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
-    for term, (r, exc, seconds) in zip(todo, _refits(samples, model, base, todo),
-                                       strict=True):
+    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo),
+                                            strict=True):
         bigger = model.add(term)
         if r is None:
             log.warning("candidate %s could not be fitted: %s", term, exc)
@@ -448,11 +457,9 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
         added = len(r.parameters) - len(base.parameters)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
         new = [k for k in r.parameters if k not in base.parameters]
-        shapes = shape_params(bigger, term) if not isinstance(samples, tuple) else ()
-        lkc: tuple[float, ...] = ()
+        shapes = shape_params(bigger, term) if lkc else ()
         if shapes:
             # the supremum of a χ² process over the shape (not identified under the null)
-            lkc = shape_curvatures(samples, model, base, term)
             df = added - len(shapes)
             p = sup_chi2_sf(lr, df, lkc)
             test = TEST_SUP
