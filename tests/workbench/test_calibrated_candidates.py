@@ -115,3 +115,41 @@ def test_the_table_says_which_test_and_df_shown_is_df_used(clean):
     assert rw.p_value == pytest.approx(0.5 * chi2_sf(rw.lr_stat, rw.df))
     d = tr.to_dict()
     assert d["test"] == TEST_SUP and d["df"] == 1 and d["shape_lkc"] == list(tr.shape_lkc)
+
+
+def test_the_efficient_score_is_the_refit_lr_at_a_fixed_shape(clean):
+    """The metric behind the curvatures: the current parameters (β, γ) readjust with the
+    candidate, so the LR at a fixed lag is the efficient score x'ε / √(x'Mx), not the
+    score taken orthogonal to the regressors alone (about half the LR on these runs)."""
+    from gyrostand.core.candidates import _efficient_metric, _mean_tangents
+    from gyrostand.core.model import context
+    from gyrostand.core.validate import prepare
+
+    sub, fit = clean
+    model = sub.model
+    used = prepare(sub.samples, "test")
+    ctx = context(used)
+    e, f = model.innovations(fit.values, used)
+    ok = np.isfinite(e) & (f > 0)
+    eps = e[ok] / np.sqrt(f[ok])
+    names, tangents = _mean_tangents(model, fit, ctx)
+    assert "markov.beta" in names and "temp.gamma" in names
+    tau = 3.0
+    x = model.add("temp_rate").term_of("temp_rate.k").regressors(
+        {**fit.values, "temp_rate.k": 0.0, "temp_rate.tau": tau}, ctx)["temp_rate.k"]
+    E, f2 = model.filter_columns(fit.values, used, np.column_stack([tangents, x]))
+    W = E[ok, 1:] / np.sqrt(f2[ok])[:, None]
+    T, c = W[:, :-1], W[:, -1]
+    K, d = _efficient_metric(T, names, fit)
+    assert K is not None
+    cm = c - K @ (d * (K.T @ c))
+    efficient = float((c @ eps) ** 2 / (cm @ cm))
+    Q = np.linalg.qr(T[:, :2])[0]  # the regressors alone (temp, bias)
+    cp = c - Q @ (Q.T @ c)
+    plain = float((cp @ eps) ** 2 / (cp @ cp))
+    r = ml(sub.samples, model.add("temp_rate"), fixed={"temp_rate.tau": tau}, start=fit.values)
+    lr = 2 * (r.loglik - fit.loglik)
+    print(f"temp_rate at τ = {tau:g} s: refit LR {lr:.3f}, efficient score² {efficient:.3f}, "
+          f"regressors-only score² {plain:.3f}")
+    assert abs(efficient - lr) < 0.1 + 0.1 * lr
+    assert plain < 0.8 * lr  # what the regressors-only metric missed
