@@ -170,6 +170,8 @@ def candidates(rep: Report) -> str:
         classes.append("sig" if c.term in sig else "")
     out.append(table(["term", "LR", "df", "p", "ΔAIC", "ΔBIC", "RMS after", "effect"],
                      rows, row_class=classes) if rows else "<p>No candidate terms.</p>")
+    if rows:
+        out.append(f"<p>p from: {e(_text.tests_used(rep.candidates))}.</p>")
     for la in rep.look_alikes:
         a, b = la["terms"]
         out.append(f'<p class="advice"><b>Look-alikes:</b> <code>{e(a)}</code> and '

@@ -104,6 +104,8 @@ def diagnosis(rep: Report, source: str) -> str:
                      f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
         if c.note:
             lines.append(f"  {'':<12} ({c.note})")
+    if rep.candidates:
+        lines.append(f"  p from: {tests_used(rep.candidates)}")
     for la in rep.look_alikes:
         lines.append("")
         lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
@@ -430,6 +432,26 @@ def joint_fit(j: JointFit, drift_unit: str = "y") -> str:
               f"residual RMS   {j.residual_rms:.6g} {drift_unit}"]
     lines += [f"warning: {w}" for w in j.warnings]
     return "\n".join(lines)
+
+
+#: what each candidate test (``Candidate.test``) refers the LR to
+TEST_TEXT = {
+    "chi2": "χ²(df)",
+    "chi2 mixture": "½χ²(0) + ½χ²(df) (null on a boundary)",
+    "chi2 +1 df": "χ²(df), one df for a parameter unidentified under the null",
+    "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
+                      "characteristic; df = coefficients)",
+}
+
+
+def tests_used(cands: Any) -> str:
+    """Which reference distribution gave each candidate's p, grouped: ``χ²(df): trend,
+    temp2; sup over the shape ...: temp_rate, hysteresis``."""
+    groups: dict[str, list[str]] = {}
+    for c in cands:
+        groups.setdefault(c.test, []).append(c.term)
+    return "; ".join(f"{TEST_TEXT.get(t, t)}: {', '.join(terms)}"
+                     for t, terms in groups.items())
 
 
 def joint_diagnosis(d: JointDiagnosis) -> str:

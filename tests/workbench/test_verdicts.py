@@ -105,13 +105,23 @@ def test_remove_reports_a_positive_statistic_and_says_the_fit_gets_worse(tmp_pat
 def test_df_shown_is_the_df_behind_the_p_value(tmp_path):
     from scipy.stats import chi2
 
+    from gyrostand.core.chisq import sup_chi2_sf
+
     rep = run_diagnose(open_subject(chamber_run(tmp_path, [], {}, seed=8)), record=False)
     by = {c.term: c for c in rep.candidates}
-    assert by["temp_lag"].df == 2 and by["markov2"].df == 3 and by["temp_rate"].df == 2
-    assert by["hysteresis"].df == 3  # h and its shape: the lag τ and the width w
+    assert by["temp_lag"].df == 2 and by["markov2"].df == 3
+    # a shape's candidates: df = the coefficient, p from the supremum over the shape (the
+    # lag τ; for hysteresis τ and the width w: a surface)
+    assert by["temp_rate"].df == 1 and len(by["temp_rate"].shape_lkc) == 1
+    assert by["hysteresis"].df == 1 and len(by["hysteresis"].shape_lkc) == 2
     for c in rep.candidates:
-        p = chi2.sf(c.lr_stat, c.df) * (0.5 if c.term == "random_walk" else 1.0)
+        if c.test == "sup over shape":
+            p = sup_chi2_sf(c.lr_stat, c.df, c.shape_lkc)
+            assert p >= chi2.sf(c.lr_stat, c.df)  # the shape's search costs something
+        else:
+            p = chi2.sf(c.lr_stat, c.df) * (0.5 if c.term == "random_walk" else 1.0)
         assert c.p_value == pytest.approx(p, rel=1e-9, abs=1e-300)
+        assert c.to_dict()["df"] == c.df and c.to_dict()["test"] == c.test
 
 
 def test_diagnose_on_a_handful_of_samples_says_they_are_too_few(tmp_path):
