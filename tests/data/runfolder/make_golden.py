@@ -22,12 +22,14 @@ import sys
 import tempfile
 from pathlib import Path
 
-import can
-import yaml
-
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
 sys.path.insert(0, str(ROOT))
+import tests  # noqa: E402, F401  (the suite's pinned numerics, before can imports numpy)
+
+# isort: split
+import can  # noqa: E402
+import yaml  # noqa: E402
 
 from gyrostand.config import parse_config  # noqa: E402
 from gyrostand.session.offline import run_replay, simulated_frames  # noqa: E402
