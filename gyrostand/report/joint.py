@@ -9,16 +9,12 @@ drawn by :mod:`.figures`, written beside the page (or embedded: ``single_file``)
 
 from __future__ import annotations
 
-import base64
-import dataclasses
-import io
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from .. import progress
 from ..core.model import context
 from ..core.multirun import WHITE_ALPHA, JointDiagnosis
 from ..render import render
@@ -26,7 +22,7 @@ from ..render.views import Plot
 from ..workbench import Subject
 from ..workbench.joint import run_joint_diagnose
 from . import figures
-from .page import DOCUMENTS, PAGE, _atomic, _png, default_dir, png_header_size, png_size
+from .page import DOCUMENTS, PAGE, _atomic, default_dir, draw_plots
 
 __all__ = ["write_joint_report", "joint_plots"]
 
@@ -119,21 +115,7 @@ def write_joint_report(subjects: Sequence[Subject], out_dir: str | Path | None =
         _atomic(path, lambda fh: fh.write(doc.encode("utf-8")))
         return path
     plots = joint_plots(subjects, rep)
-    drawn = []
-    with progress.stage("report", "figures", total=len(plots), unit="figures") as bar:
-        for plot, make in plots:
-            fig = make()
-            if single_file:
-                buf = io.BytesIO()
-                _png(fig)(buf)
-                png = buf.getvalue()
-                drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
-                    "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
-                (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
-            else:
-                _atomic(out / plot.file, _png(fig))
-                drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
-            bar.update()
+    drawn = draw_plots(plots, out, single_file)
     from ..render.text import joint_diagnosis
 
     title = f"gyrostand report: {first.gyro}, {len(subjects)} runs (joint)"

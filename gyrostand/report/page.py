@@ -152,21 +152,7 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
               "smoother removes their slow part.)"),
          lambda: figures.allan(rep, s.dt)),
     ]
-    drawn = []
-    with progress.stage("report", "figures", total=len(plots), unit="figures") as bar:
-        for plot, make in plots:
-            fig = make()
-            if single_file:
-                buf = io.BytesIO()
-                _png(fig)(buf)
-                png = buf.getvalue()
-                drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
-                    "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
-                (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
-            else:
-                _atomic(out / plot.file, _png(fig))
-                drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
-            bar.update()
+    drawn = draw_plots(plots, out, single_file)
     page = render(ReportPage(subject, rep, drawn, steps, conv_source, now, __version__,
                              allan), "html")
     path = out / PAGE
@@ -205,3 +191,26 @@ def png_header_size(data: bytes, name: str = "image") -> tuple[int, int]:
         raise ValueError(f"{name}: not a PNG file")
     w, h = struct.unpack(">II", data[16:24])
     return int(w), int(h)
+
+
+def draw_plots(plots, out: Path, single_file: bool) -> list:
+    """Draw each ``(plot, make)`` (``make()`` returns the figure): its PNG written beside
+    the page in ``out``, or, with ``single_file``, embedded as a data URI (a PNG an
+    earlier folder report left there is removed); the plots with their sizes and
+    sources, in order. Shared by the single-run and the joint report."""
+    drawn = []
+    with progress.stage("report", "figures", total=len(plots), unit="figures") as bar:
+        for plot, make in plots:
+            fig = make()
+            if single_file:
+                buf = io.BytesIO()
+                _png(fig)(buf)
+                png = buf.getvalue()
+                drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
+                    "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
+                (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
+            else:
+                _atomic(out / plot.file, _png(fig))
+                drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
+            bar.update()
+    return drawn
