@@ -29,6 +29,28 @@ def smooth_truth(n: int = 60, k: int = 0):
     return Truth(t, drift, temp)
 
 
+def damaged(raw: bytes, data, first: int) -> tuple[bytes, str, int]:
+    """``raw`` damaged the way hypothesis's ``data`` draws it, at or after byte ``first``
+    (a BLF file's header is kept): cut short, overwritten with random bytes, one bit
+    flipped, or zeroed over a stretch; with the kind of damage and its offset."""
+    from hypothesis import strategies as st
+
+    out = bytearray(raw)
+    kind = data.draw(st.sampled_from(["truncate", "overwrite", "flip", "zero"]))
+    at = data.draw(st.integers(first, len(out) - 1))
+    if kind == "truncate":
+        out = out[:at]
+    elif kind == "overwrite":
+        n = data.draw(st.integers(1, 300))
+        out[at:at + n] = data.draw(st.binary(min_size=n, max_size=n))
+    elif kind == "flip":
+        out[at] ^= 1 << data.draw(st.integers(0, 7))
+    else:
+        n = data.draw(st.integers(1, 2000))
+        out[at:at + n] = bytes(min(n, len(out) - at))
+    return bytes(out), kind, at
+
+
 def make_ingest(cfg, capacity: int | None = None) -> Ingest:
     cm = ChannelMap.from_config(cfg)
     lst = DecodingListener(cfg.db, cm, capacity=capacity or cfg.sampling.buffer,

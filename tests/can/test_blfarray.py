@@ -13,7 +13,7 @@ import struct
 import can
 import pytest
 from can.io import blf
-from canhelpers import smooth_truth
+from canhelpers import damaged, smooth_truth
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -218,19 +218,7 @@ def mixed_bytes(tmp_path_factory):
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.data())
 def test_damaged_files_read_alike(mixed_bytes, tmp_path_factory, data):
-    raw = bytearray(mixed_bytes)
-    kind = data.draw(st.sampled_from(["truncate", "overwrite", "flip", "zero"]))
-    at = data.draw(st.integers(144, len(raw) - 1))
-    if kind == "truncate":
-        raw = raw[:at]
-    elif kind == "overwrite":
-        n = data.draw(st.integers(1, 300))
-        raw[at:at + n] = data.draw(st.binary(min_size=n, max_size=n))
-    elif kind == "flip":
-        raw[at] ^= 1 << data.draw(st.integers(0, 7))
-    else:
-        n = data.draw(st.integers(1, 2000))
-        raw[at:at + n] = bytes(min(n, len(raw) - at))
+    raw, _, _ = damaged(mixed_bytes, data, 144)
     path = tmp_path_factory.mktemp("bad") / "d.blf"
     path.write_bytes(bytes(raw))
     d1, d2 = LogDamage(), LogDamage()

@@ -12,7 +12,7 @@ import re
 
 import can
 import pytest
-from canhelpers import ROOT, smooth_truth
+from canhelpers import ROOT, damaged, smooth_truth
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -56,19 +56,7 @@ def blf_bytes(tmp_path_factory):
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.data())
 def test_blf_damaged_at_random_offsets_reads_the_rest(blf_bytes, tmp_path_factory, data):
-    raw = bytearray(blf_bytes)
-    kind = data.draw(st.sampled_from(["truncate", "overwrite", "flip", "zero"]))
-    at = data.draw(st.integers(BLF_HEADER, len(raw) - 1))
-    if kind == "truncate":
-        raw = raw[:at]
-    elif kind == "overwrite":
-        n = data.draw(st.integers(1, 300))
-        raw[at:at + n] = data.draw(st.binary(min_size=n, max_size=n))
-    elif kind == "flip":
-        raw[at] ^= 1 << data.draw(st.integers(0, 7))
-    else:
-        n = data.draw(st.integers(1, 2000))
-        raw[at:at + n] = bytes(min(n, len(raw) - at))
+    raw, kind, at = damaged(blf_bytes, data, BLF_HEADER)
     path = tmp_path_factory.mktemp("bad") / "d.blf"
     path.write_bytes(bytes(raw))
     damage = LogDamage()
