@@ -244,7 +244,7 @@ def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
     when :func:`~gyrostand.can.blfarray.parse_container` declines, by python-can's own
     ``_parse_container`` (the frames it gave before an error are delivered, then the
     error is raised, as the per-object path delivers them)."""
-    from gyrostand.can.blfarray import FrameArrays, parse_container
+    from gyrostand.can.blfarray import parse_container
 
     tail = reader._tail
     got = parse_container(tail + data if tail else data, reader.start_timestamp)
@@ -253,15 +253,7 @@ def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
         if len(frames):
             yield frames
         return
-    out: list[Frame] = []
-    try:
-        out.extend(frame_fields(m) for m in reader._parse_container(data))
-    except Exception:
-        if out:
-            yield FrameArrays.from_frames(out)
-        raise
-    if out:
-        yield FrameArrays.from_frames(out)
+    yield from _as_arrays((frame_fields(m) for m in reader._parse_container(data)), None)
 
 
 def read_log_arrays(path: str | Path, damage: LogDamage | None = None,
@@ -273,13 +265,19 @@ def read_log_arrays(path: str | Path, damage: LogDamage | None = None,
     if path.suffix.lower() == ".blf" and path.is_file():
         yield from _read_blf(path, damage if damage is not None else LogDamage(), True)
         return
+    yield from _as_arrays((frame_fields(m) for m in read_log(path, damage)), chunk)
+
+
+def _as_arrays(frames: Iterable[Frame], chunk: int | None) -> Iterator[Any]:
+    """``frames`` as FrameArrays of ``chunk`` frames (None: one for all); an error raised
+    by ``frames`` comes after the frames read before it."""
     from gyrostand.can.blfarray import FrameArrays
 
     buf: list[Frame] = []
     try:
-        for msg in read_log(path, damage):
-            buf.append(frame_fields(msg))
-            if len(buf) >= chunk:
+        for f in frames:
+            buf.append(f)
+            if chunk is not None and len(buf) >= chunk:
                 yield FrameArrays.from_frames(buf)
                 buf = []
     except Exception:

@@ -23,8 +23,9 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import can
 
@@ -146,19 +147,29 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+def _receive_and_pump(batches: Iterable[Any], receive: Callable[[Any], None],
+                      ingest: Ingest, pump_every: int) -> Generator[list[Bin], None, int]:
+    """Receive each batch of frames, and pump the ingest after every full one (a short
+    batch is the last: the caller's ``finish()`` pumps it), as the serial loop pumps every
+    ``pump_every`` frames; returns the number of frames received."""
+    n = 0
+    for frames in batches:
+        receive(frames)
+        n += len(frames)
+        if len(frames) == pump_every:
+            bins = ingest.pump()
+            if bins:
+                yield bins
+    return n
+
+
 def _replay_arrays(paths: list[Path], ingest: Ingest, pump_every: int,
                    damage: LogDamage) -> Iterator[list[Bin]]:
     """:func:`replay` of log files read as arrays in this process: batches of
     ``pump_every`` frames, each received then pumped, as the serial loop pumps."""
-    receive, pump = ingest.listener.receive_arrays, ingest.pump
-    n = 0
-    for frames in array_batches(read_logs_arrays(paths, damage), pump_every):
-        receive(frames)
-        n += len(frames)
-        if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
-            bins = pump()
-            if bins:
-                yield bins
+    n = yield from _receive_and_pump(array_batches(read_logs_arrays(paths, damage),
+                                                   pump_every),
+                                     ingest.listener.receive_arrays, ingest, pump_every)
     bins = ingest.finish()
     if bins:
         yield bins
@@ -171,14 +182,8 @@ def _replay_parallel(paths: list[Path], ingest: Ingest, pump_every: int,
     frames, each received then pumped, as the serial loop pumps every ``pump_every``."""
     reader = ReaderProcess(paths, batch=pump_every, arrays=arrays)
     receive = ingest.listener.receive_arrays if arrays else ingest.listener.receive_frames
-    pump = ingest.pump
     try:
-        for frames in reader:
-            receive(frames)
-            if len(frames) == pump_every:  # a short batch is the last: finish() pumps it
-                bins = pump()
-                if bins:
-                    yield bins
+        yield from _receive_and_pump(reader, receive, ingest, pump_every)
     finally:
         damage.add(reader.damage.as_dict())
     bins = ingest.finish()
