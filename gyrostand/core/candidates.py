@@ -47,6 +47,7 @@ import os
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -674,6 +675,11 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     return [marked[first.term], marked[other.term], *rest]
 
 
+def _checks(fit: FitResult, samples: Samples, unit: str) -> tuple[Diagnosis, ModelError]:
+    """The residual diagnostics and the model error of ``fit``."""
+    return diagnose_fit(fit, samples), fit_error(fit, samples, unit)
+
+
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
              unit: str = DRIFT_UNIT) -> Report:
@@ -688,47 +694,36 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
             f"{samples.source}: {samples.n_observed} observed samples are too few to judge "
             f"a model (diagnose needs at least {MIN_DIAGNOSE_SAMPLES})")
     fit = base if base is not None else ml(samples, model)
+    first = fit
     notes: list[str] = []
     cands: list[Candidate] = []
-    # the residual checks and the model error of the current fit need no candidate: from
-    # the main thread they run beside the refits (filling the cores as the refits end)
-    side = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose")
-            if threading.current_thread() is threading.main_thread() else None)
-    first = fit
-    early = side.submit(_checks, first, samples, unit) if side is not None else None
-    try:
-        return _diagnose(samples, model, fit, first, early, notes, cands, alpha, terms, unit)
-    finally:
-        if side is not None:
-            side.shutdown(wait=True)
-
-
-def _checks(fit: FitResult, samples: Samples, unit: str) -> tuple[Diagnosis, ModelError]:
-    """The residual diagnostics and the model error of ``fit``."""
-    return diagnose_fit(fit, samples), fit_error(fit, samples, unit)
-
-
-def _diagnose(samples: Samples, model: Model, fit: FitResult, first: FitResult,
-              early: Future | None, notes: list[str], cands: list[Candidate], alpha: float,
-              terms: list[str] | None, unit: str) -> Report:
-    for _ in range(3):
-        cands = rank_candidates(samples, model, fit, terms)
+    with ExitStack() as stack:
+        # the residual checks and the model error of the current fit need no candidate:
+        # from the main thread they run beside the refits (filling the cores as they end)
+        early: Future | None = None
+        if threading.current_thread() is threading.main_thread():
+            side = stack.enter_context(
+                ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
+            early = side.submit(_checks, first, samples, unit)
+        for _ in range(3):
+            cands = rank_candidates(samples, model, fit, terms)
+            m = max(len(cands), 1)
+            alpha_each = alpha / m
+            better = _refit_from_candidates(samples, model, fit, cands, alpha_each)
+            if better is None or len(notes) >= 2:
+                break
+            assert better.loglik is not None and fit.loglik is not None
+            notes.append(f"the current fit was not at its maximum; refitted (ln L "
+                         f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate "
+                         "recomputed")
+            fit = better
         m = max(len(cands), 1)
         alpha_each = alpha / m
-        better = _refit_from_candidates(samples, model, fit, cands, alpha_each)
-        if better is None or len(notes) >= 2:
-            break
-        assert better.loglik is not None and fit.loglik is not None
-        notes.append(f"the current fit was not at its maximum; refitted (ln L "
-                     f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate recomputed")
-        fit = better
-    m = max(len(cands), 1)
-    alpha_each = alpha / m
-    cands = _order_competitors(samples, model, cands, alpha_each)
-    if early is not None and fit is first:
-        diag, err = early.result()
-    else:
-        diag, err = _checks(fit, samples, unit)
+        cands = _order_competitors(samples, model, cands, alpha_each)
+        if early is not None and fit is first:
+            diag, err = early.result()
+        else:
+            diag, err = _checks(fit, samples, unit)
     reasons = []
     if not diag.white:
         reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
