@@ -16,18 +16,22 @@ import os
 import sys
 
 
+def cpu_flags() -> set[str]:
+    """The CPU's feature flags from /proc/cpuinfo (empty where there is none)."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
 def _pin_numerics() -> None:
     if "numpy" in sys.modules:  # too late: the libraries chose already
         return
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            flags = set()
-            for line in f:
-                if line.startswith("flags"):
-                    flags = set(line.split(":", 1)[1].split())
-                    break
-    except OSError:
-        return
+    flags = cpu_flags()
     if {"avx2", "fma"} <= flags:
         os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
         if "avx512f" in flags:

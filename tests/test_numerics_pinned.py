@@ -6,18 +6,7 @@ import os
 import pytest
 from threadpoolctl import threadpool_info
 
-from tests import _pin_numerics  # noqa: F401  (the module ran first)
-
-
-def _flags() -> set[str]:
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return set()
+from tests import cpu_flags as _flags  # the package pinned the numerics on import
 
 
 @pytest.mark.skipif(not {"avx2", "fma"} <= _flags(), reason="no AVX2+FMA x86 CPU")
