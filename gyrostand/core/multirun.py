@@ -277,8 +277,11 @@ class _JointProblem:
                 idx = self.lin_index[r]
                 A[np.ix_(idx, idx)] += G[np.ix_(free, free)]
                 bv[idx] += G[free] @ c0
-        if L:
-            theta, *_ = np.linalg.lstsq(A, bv, rcond=1e-13)
+        if L:  # equilibrated: a trend counted from the first switch-on has a large column
+            d = np.diag(A)
+            d = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
+            x, *_ = np.linalg.lstsq(A * np.outer(d, d), bv * d, rcond=1e-13)
+            theta = x * d
             S -= float(bv @ theta)
         else:
             theta = np.zeros(0)

@@ -307,6 +307,9 @@ class SeparationResult:
     longer: tuple[float, dict[str, float]] | None = None
     #: time-only rivals: the budget split into switch-ons (:func:`separate_switch_ons`)
     switch_ons: SwitchOnResult | None = None
+    #: time-only rivals with a turn-on bias spread: the power-cycle protocol
+    #: (:func:`separate_power_cycle`)
+    power_cycle: PowerCycleResult | None = None
 
     @property
     def gain(self) -> float:
@@ -624,6 +627,8 @@ def _protocol_distance(fit: Model, params: Sequence[Mapping[str, float]],
     y, A = Z[:, 0], Z[:, 1:]
     if A.shape[1] == 0:
         return float(y @ y)
+    norm = np.linalg.norm(A, axis=0)  # equilibrated: the trend's column is large
+    A = A / np.where(norm > 0, norm, 1.0)
     beta, *_ = np.linalg.lstsq(A, y, rcond=None)
     r = y - A @ beta
     return float(r @ r)
