@@ -280,13 +280,16 @@ def write_power_cycle(out: Path, pcr, limits) -> None:
     pc = pcr.best
     run = switch_on_limits(limits, pc.k)
     prog = standard_cycle(run)
-    rows = prog.rows()
+    cut = prog.setpoint(run.duration)  # a short run's cycle is cut at its duration
+    rows = list(zip(cut.times, cut.temps, strict=True))
     with open(out / "power_cycle.csv", "w", encoding="utf-8", newline="") as fh:
         fh.write("time_s,setpoint_degC,power\n")
         for r, start in enumerate(pc.starts):
             for t, T in rows:
                 fh.write(f"{start + t:.1f},{T:.3f},1\n")
             end = start + run.duration
+            if rows[-1][0] < run.duration:
+                fh.write(f"{end:.1f},{rows[-1][1]:.3f},1\n")
             fh.write(f"{end:.1f},{rows[-1][1]:.3f},0\n")
             if r < pc.k - 1:
                 fh.write(f"{end + pc.off:.1f},{prog.start:.3f},0\n")
