@@ -28,6 +28,26 @@ The search maximizes the symmetrized Λ = Λ(A→B) + Λ(B→A) with the chamber
 :func:`~.design.search`, on a cheaper Λ with B's noise held at θ_B (its ranking of programs,
 not its value); the designed and the reference programs are then reported with the full
 minimization, and :func:`verify` fits both models by ML to simulated runs to confirm it.
+
+Time-only rivals (a trend c·(t − t₀) and a warm-up A·e^{−(t−t₀)/τ}: functions of the time
+since switch-on alone) look alike on every temperature program. What tells them apart is a
+power cycle (:class:`PowerCycle`, :func:`separate_power_cycle`): the powered-on budget split
+into k switch-ons, δ_r apart on one clock (off periods: chamber soak, gyro unpowered), with
+
+    y_r(t) = μ + u_r + c·(t − t_on,1) [trend]  or  μ + u_r + A·e^{−(t − t_on,r)/τ} [warm-up]
+             + the rest of the model (its Markov drift from its stationary law at each
+             switch-on),   u_r ~ N(0, σ_b²) independent,
+
+the trend keeping its rate across the off periods, the warm-up restarting with the same A
+and τ, σ_b the known turn-on-to-turn-on spread of the bias (the runs' repeatability). Each
+run's covariance is V_r = Σ_r + σ_b² 11', the runs independent given the parameters; Λ is
+the same 2 KL with the whitening of V_r (:func:`_protocol_distance`: Kalman whitening of
+Σ_r, then the whitened ones direction shrunk by Woodbury) and every parameter shared, and
+:func:`verify_protocol` fits both by :func:`~.multirun.joint_ml_fit` with the same model
+(``bias_spread``, ``absolute_time``, ``shared=["warmup"]``). A trend's level climbs
+c·(L + off) from one switch-on to the next, a warm-up's starts again at μ + A: the larger
+that step is beside σ_b, the better they separate; as σ_b → ∞ every run's own bias
+absorbs it again (the free-bias split of :func:`separate_switch_ons`).
 """
 
 from __future__ import annotations
