@@ -54,10 +54,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--separate", nargs=2, default=None, metavar=("A", "B"),
                    help="design the run that tells the look-alike terms A and B apart "
                         "(e.g. temp_lag markov2): the model with A vs the model with B")
-    p.add_argument("--off-hours", type=number(positive=True), default=12.0,
+    p.add_argument("--off-hours", type=number(positive=True), default=24.0,
                    help="--separate of time-only effects (trend warmup) with a turn-on bias "
                         "spread (--param bias.spread=SIGMA_B): the longest off period between "
-                        "switch-ons of the power-cycle protocol, h (12; chamber soak with the "
+                        "switch-ons of the power-cycle protocol, h (24; chamber soak with the "
                         "gyro unpowered, not counted in --hours)")
     p.add_argument("--spread-from", default=None, metavar="JSON",
                    help="the turn-on bias spread from `gyrostand identify RUN RUN ... --format "

@@ -272,19 +272,20 @@ def _spread(args: argparse.Namespace, given: dict[str, float]) -> float | None:
 
 def write_power_cycle(out: Path, pcr, limits) -> None:
     """power_cycle.csv (time / set-point / power of the whole protocol, off periods held
-    at the next run's start temperature) and simulate_power_cycle.yaml (one switch-on's
-    program, what every run repeats)."""
+    at the next run's start temperature) and simulate_power_cycle.yaml (one ``simulate:``
+    document per switch-on, its program)."""
     from ..core.design import standard_cycle
-    from ..core.separation import switch_on_limits
+    from ..core.separation import run_limits_of
 
     pc = pcr.best
-    run = switch_on_limits(limits, pc.k)
-    prog = standard_cycle(run)
-    cut = prog.setpoint(run.duration)  # a short run's cycle is cut at its duration
-    rows = list(zip(cut.times, cut.temps, strict=True))
+    docs = []
     with open(out / "power_cycle.csv", "w", encoding="utf-8", newline="") as fh:
         fh.write("time_s,setpoint_degC,power\n")
-        for r, start in enumerate(pc.starts):
+        for r, (start, h) in enumerate(zip(pc.starts, pc.hours, strict=True)):
+            run = run_limits_of(limits, h * 3600.0)
+            prog = standard_cycle(run)
+            cut = prog.setpoint(run.duration)  # a short run's cycle is cut at its duration
+            rows = list(zip(cut.times, cut.temps, strict=True))
             for t, T in rows:
                 fh.write(f"{start + t:.1f},{T:.3f},1\n")
             end = start + run.duration
@@ -292,15 +293,17 @@ def write_power_cycle(out: Path, pcr, limits) -> None:
                 fh.write(f"{end:.1f},{rows[-1][1]:.3f},1\n")
             fh.write(f"{end:.1f},{rows[-1][1]:.3f},0\n")
             if r < pc.k - 1:
-                fh.write(f"{end + pc.off:.1f},{prog.start:.3f},0\n")
-    lines = ["# gyrostand design --separate: the power-cycle protocol's runs. Every switch-on",
-             f"# runs this program ({pc.run_hours:g} h powered on); switch the gyro off for "
-             f"{pc.off / 3600:g} h",
-             f"# between runs ({pc.k} switch-ons), the chamber soaking at "
-             f"{prog.start:g} °C. Paste into a session file's simulate: section.",
-             "simulate:", f"  duration: {run.duration:g}", "  temperature:"]
-    lines += [f"    - [{round(t, 1):g}, {round(T, 4):g}]" for t, T in rows]
-    (out / "simulate_power_cycle.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+                nxt = standard_cycle(run_limits_of(limits, pc.hours[r + 1] * 3600.0)).start
+                fh.write(f"{end + pc.off:.1f},{nxt:.3f},0\n")
+            lines = [f"# switch-on {r + 1} of {pc.k}: {h:g} h powered on"
+                     + (f", then the gyro off for {pc.off / 3600:g} h" if r < pc.k - 1 else ""),
+                     "simulate:", f"  duration: {run.duration:g}", "  temperature:"]
+            lines += [f"    - [{round(t, 1):g}, {round(T, 4):g}]" for t, T in rows]
+            docs.append("\n".join(lines))
+    head = ("# gyrostand design --separate: the power-cycle protocol, one simulate: document "
+            "per switch-on\n")
+    (out / "simulate_power_cycle.yaml").write_text(head + "\n---\n".join(docs) + "\n",
+                                                   encoding="utf-8")
 
 
 def power_cycle_document(pcr) -> dict[str, Any]:
@@ -313,9 +316,9 @@ def power_cycle_document(pcr) -> dict[str, Any]:
             "warmup": "restarts at every switch-on with the same A and tau",
             "off_periods": "chamber soak with the gyro unpowered",
         },
-        "tried": [{"runs": k, "off_hours": off, "expected_lr": _lr(lam)}
-                  for (k, off), lam in pcr.expected.items()],
-        "protocol": {"runs": pc.k, "run_hours": pc.run_hours, "off_hours": pc.off / 3600.0,
+        "tried": [{"run_hours": list(hours), "off_hours": off, "expected_lr": _lr(lam)}
+                  for (hours, off), lam in pcr.expected.items()],
+        "protocol": {"runs": pc.k, "run_hours": list(pc.hours), "off_hours": pc.off / 3600.0,
                      "chamber_hours": pc.chamber_hours,
                      "switch_on_hours": [s / 3600.0 for s in pc.starts]},
         "expected_lr": _lr(pcr.best_expected),
@@ -343,17 +346,19 @@ def power_cycle_lines(res) -> list[str]:
              "  - a warm-up restarts at every switch-on, with the same amplitude and time "
              "constant (the same gyro, the same self-heating);",
              "  - the off periods are chamber soak with the gyro unpowered; the powered-on "
-             f"hours stay {pc.k * pc.run_hours:g} h.",
-             f"  {'runs':>4} {'hours each':>10} {'off h':>6} {r.a:>12} {r.b:>12} {'sum':>10} "
+             f"hours stay {sum(pc.hours):g} h.",
+             f"  {'runs, h each':>16} {'off h':>6} {r.a:>12} {r.b:>12} {'sum':>10} "
              f"{'gain':>8}"]
-    for (k, off), lam in pcr.expected.items():
+    for (hours, off), lam in pcr.expected.items():
         tot = sum(lam.values())
-        mark = "  <- chosen" if (k, off) == (pc.k, pc.off / 3600.0) else ""
-        lines.append(f"  {k:>4} {pc.run_hours * pc.k / k:>10.3g} {off:>6.3g} {lam[r.a]:>12.4g} "
+        mark = "  <- chosen" if (hours, off) == pc.key else ""
+        lines.append(f"  {' + '.join(f'{h:g}' for h in hours):>16} {off:>6.3g} "
+                     f"{lam[r.a]:>12.4g} "
                      f"{lam[r.b]:>12.4g} {tot:>10.4g} "
                      f"{tot / ref if ref > 0 else math.inf:>8.1f}{mark}")
     best = pcr.best_expected
-    lines.append(f"-> {pc.k} switch-ons of {pc.run_hours:g} h, {pc.off / 3600:g} h off between "
+    lines.append(f"-> {pc.k} switch-ons of {' + '.join(f'{h:g}' for h in pc.hours)} h, "
+                 f"{pc.off / 3600:g} h off between "
                  f"them ({pc.chamber_hours:g} h in the chamber): expected LR "
                  f"{sum(best.values()):.4g} ({r.a} {best[r.a]:.3g}, {r.b} {best[r.b]:.3g}) vs "
                  f"{ref:.3g} for one standard cycle: gain {pcr.gain:.1f}x (the choice: the "
@@ -375,5 +380,5 @@ def power_cycle_lines(res) -> list[str]:
                          f"{x['mean_lr']:.3g}" + (f" ({x['failed']} fits failed)"
                                                    if x["failed"] else ""))
     lines.append("   files: power_cycle.csv (time, set-point, power), "
-                 "simulate_power_cycle.yaml (one switch-on's program)")
+                 "simulate_power_cycle.yaml (each switch-on's program)")
     return lines

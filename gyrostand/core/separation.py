@@ -72,7 +72,7 @@ __all__ = ["Rivals", "SeparationResult", "SwitchOnResult", "rivals", "expected_l
            "separate", "separate_switch_ons", "switch_on_records", "time_only", "verify",
            "run_limits", "design_command", "PowerCycle", "PowerCycleResult", "power_cycle",
            "separate_power_cycle", "expected_lr_protocol", "simulate_protocol",
-           "verify_protocol"]
+           "verify_protocol", "protocol_splits", "run_record"]
 
 #: verify's ML fits: only ln L is used (no standard errors); the best start (the model's
 #: own parameters among them) refined
@@ -562,16 +562,16 @@ def separate_switch_ons(r: Rivals, limits: ChamberLimits, *, max_runs: int = MAX
 
 #: the off periods a power-cycle design tries, as shares of the longest one allowed
 OFF_SHARES = (0.25, 0.5, 1.0)
-#: the default longest off period (s): an overnight soak
-MAX_OFF = 12 * 3600.0
+#: the default longest off period (s): a day's soak
+MAX_OFF = 24 * 3600.0
 
 
 @dataclass(frozen=True)
 class PowerCycle:
-    """A power-cycle protocol: ``k`` switch-ons of the gyro in the chamber, each run a
-    ``1/k`` share of the powered-on budget with its own standard cycle, separated by off
-    periods of ``off`` s (the gyro unpowered, soaking in the chamber at the next run's
-    start temperature). ``spread``: σ_b, the turn-on-to-turn-on spread of the bias.
+    """A power-cycle protocol: ``k`` switch-ons of the gyro in the chamber, run r powered
+    on for its share of the budget with its own standard cycle, the runs separated by off
+    periods of ``off`` s (the gyro unpowered, the chamber soaking at the next run's start
+    temperature). ``spread``: σ_b, the turn-on-to-turn-on spread of the bias.
 
     The model of the set (:func:`~.multirun.joint_ml_fit`'s protocol options): a turn-on
     bias b_r = μ + u_r, u_r ~ N(0, σ_b²); a trend c·(t − t_on,1) on the clock of the first
@@ -588,6 +588,16 @@ class PowerCycle:
         return len(self.runs)
 
     @property
+    def hours(self) -> tuple[float, ...]:
+        """Each run's powered-on hours."""
+        return tuple(round(float(t[-1] - t[0]) / 3600.0, 6) for t, _ in self.runs)
+
+    @property
+    def key(self) -> tuple[tuple[float, ...], float]:
+        """(each run's hours, the off period's hours)."""
+        return self.hours, round(self.off / 3600.0, 6)
+
+    @property
     def starts(self) -> tuple[float, ...]:
         """Each switch-on's time from the first, s."""
         out, t = [], 0.0
@@ -597,13 +607,9 @@ class PowerCycle:
         return tuple(out)
 
     @property
-    def run_hours(self) -> float:
-        return float(self.runs[0][0][-1] - self.runs[0][0][0]) / 3600.0
-
-    @property
     def chamber_hours(self) -> float:
         """Powered-on hours plus the off periods: the chamber time the protocol takes."""
-        return self.k * self.run_hours + (self.k - 1) * self.off / 3600.0
+        return sum(self.hours) + (self.k - 1) * self.off / 3600.0
 
     def fit_options(self, model: Model) -> dict[str, Any]:
         """:func:`~.multirun.joint_ml_fit`'s options for a set run under this protocol."""
@@ -611,10 +617,46 @@ class PowerCycle:
                 "shared": [t for t in model.names if t == "warmup"]}
 
 
-def power_cycle(limits: ChamberLimits, k: int, off: float, spread: float) -> PowerCycle:
-    """The protocol of ``k`` switch-ons within ``limits.duration`` powered-on seconds
-    (each the standard cycle of its share, :func:`switch_on_records`), ``off`` s apart."""
-    return PowerCycle(tuple(switch_on_records(limits, k)), float(off), float(spread))
+def run_limits_of(limits: ChamberLimits, duration: float) -> ChamberLimits:
+    """One switch-on's limits: ``duration`` s, as many legs and soaks as fit."""
+    soak = min(limits.min_soak, duration / 5.0)
+    return dataclasses.replace(
+        limits, duration=duration, min_soak=soak,
+        legs=max(1, min(limits.legs, int((duration - limits.dt) // max(soak, 1.0)))))
+
+
+def run_record(limits: ChamberLimits, duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """One switch-on's record: the standard cycle of ``duration`` s (cut at it)."""
+    run = run_limits_of(limits, duration)
+    return run.grid, case_temperature(standard_cycle(run).setpoint(run.duration), run)
+
+
+def power_cycle(limits: ChamberLimits, split: int | Sequence[float], off: float,
+                spread: float) -> PowerCycle:
+    """The protocol of ``split`` switch-ons (a number: equal shares of
+    ``limits.duration`` powered-on seconds; or each run's hours), ``off`` s apart."""
+    hours = ([limits.duration / split / 3600.0] * split if isinstance(split, int)
+             else [float(h) for h in split])
+    return PowerCycle(tuple(run_record(limits, h * 3600.0) for h in hours), float(off),
+                      float(spread))
+
+
+def protocol_splits(limits: ChamberLimits, max_runs: int = MAX_SWITCH_ONS,
+                    min_run: float = MIN_RUN) -> list[tuple[float, ...]]:
+    """The splits of the powered-on budget a power-cycle design tries (hours per run):
+    k = 2..``max_runs`` equal runs of at least ``min_run`` s, and a long first run
+    followed by k − 1 = 1, 2 runs of ``min_run`` (measured: the long run carries the
+    within-run shape, the short ones the level at each switch-on)."""
+    D = limits.duration
+    out = [tuple([round(D / k / 3600.0, 6)] * k) for k in range(2, max_runs + 1)
+           if D / k >= min_run]
+    for short in (1, 2):
+        first = D - short * min_run
+        if first > min_run * (1 + 1e-9) and short + 1 <= max_runs:
+            split = tuple([round(first / 3600.0, 6)] + [round(min_run / 3600.0, 6)] * short)
+            if split not in out:
+                out.append(split)
+    return out
 
 
 def _protocol_distance(fit: Model, params: Sequence[Mapping[str, float]],
@@ -729,11 +771,11 @@ def expected_lr_protocol(r: Rivals, pc: PowerCycle, dt: float) -> dict[str, floa
 
 @dataclass
 class PowerCycleResult:
-    """Λ (each direction) of the power-cycle protocols tried, keyed (k, off hours); the
-    best; the reference (one standard cycle, one switch-on) Λ; Λ of the best protocol's
-    (k, off) at other spreads σ_b."""
+    """Λ (each direction) of the power-cycle protocols tried, keyed by
+    :attr:`PowerCycle.key` (each run's hours, off hours); the chosen one; the reference
+    (one standard cycle, one switch-on) Λ; Λ of the chosen protocol at other spreads σ_b."""
 
-    expected: dict[tuple[int, float], dict[str, float]]
+    expected: dict[tuple[tuple[float, ...], float], dict[str, float]]
     best: PowerCycle
     reference: dict[str, float]
     spread: float
@@ -742,7 +784,7 @@ class PowerCycleResult:
 
     @property
     def best_expected(self) -> dict[str, float]:
-        return self.expected[(self.best.k, self.best.off / 3600.0)]
+        return self.expected[self.best.key]
 
     @property
     def gain(self) -> float:
@@ -763,39 +805,40 @@ def separate_power_cycle(r: Rivals, limits: ChamberLimits, spread: float, *,
                          min_run: float = MIN_RUN, reference: dict[str, float] | None = None,
                          spreads: Sequence[float] = SPREADS,
                          progress: Callable[[int], None] | None = None) -> PowerCycleResult:
-    """The power-cycle protocol (k = 2..``max_runs`` switch-ons of at least ``min_run`` s
-    within the powered-on budget ``limits.duration``; off periods of ``OFF_SHARES`` ×
-    ``max_off``) that best separates the rivals with the turn-on bias a random effect of
-    spread ``spread`` (σ_b): the largest Λ of the weaker direction, then the largest sum
-    (both are reported); ``reference``: Λ of one standard cycle (else computed)."""
+    """The power-cycle protocol (the splits of :func:`protocol_splits` of the powered-on
+    budget ``limits.duration``; off periods of ``OFF_SHARES`` × ``max_off``) that best
+    separates the rivals with the turn-on bias a random effect of spread ``spread`` (σ_b):
+    the largest Λ of the weaker direction, then the largest sum (both are reported);
+    ``reference``: Λ of one standard cycle (else computed)."""
     if not spread >= 0:
         raise ModelError(f"the turn-on bias spread must be >= 0, got {spread}")
-    ks = [k for k in range(2, max_runs + 1) if limits.duration / k >= min_run]
-    if not ks:
+    splits = protocol_splits(limits, max_runs, min_run)
+    if not splits:
         raise ModelError(f"a power-cycle protocol needs two runs of at least "
                          f"{min_run / 3600:g} h: {limits.duration / 3600:g} h is too short")
     if reference is None:
         reference = expected_lr(r, limits.grid, case_temperature(
             standard_cycle(limits).setpoint(limits.duration), limits), limits.dt)
     offs = sorted({round(share * max_off / 3600.0, 6) for share in OFF_SHARES})
-    out: dict[tuple[int, float], dict[str, float]] = {}
-    for k in ks:
+    out: dict[tuple[tuple[float, ...], float], dict[str, float]] = {}
+    protocols = {}
+    for split in splits:
         for off_h in offs:
-            pc = power_cycle(limits, k, off_h * 3600.0, spread)
-            out[(k, off_h)] = expected_lr_protocol(r, pc, limits.dt)
-            log.info("power cycle: %d switch-ons, off %g h: expected LR %s", k, off_h,
-                     out[(k, off_h)])
+            pc = power_cycle(limits, split, off_h * 3600.0, spread)
+            out[pc.key] = expected_lr_protocol(r, pc, limits.dt)
+            protocols[pc.key] = pc
+            log.info("power cycle: runs %s h, off %g h: expected LR %s", split, off_h,
+                     out[pc.key])
             if progress is not None:
                 progress(1)
     # a design is as good as its weaker direction: the sum grows without bound with the
     # off period in the trend's direction alone (the level climbs while the gyro is off),
-    # while the warm-up's direction saturates; the larger smaller-Λ wins, then the sum
-    k, off_h = max(out, key=lambda key: (round(min(out[key].values()), 3),
-                                         sum(out[key].values())))
-    best = power_cycle(limits, k, off_h * 3600.0, spread)
+    # while the warm-up's direction grows slowly; the larger smaller-Λ wins, then the sum
+    key = max(out, key=lambda kk: (round(min(out[kk].values()), 3), sum(out[kk].values())))
+    best = protocols[key]
     res = PowerCycleResult(out, best, dict(reference), float(spread))
     for sb in spreads:
-        res.by_spread[float(sb)] = (out[(k, off_h)] if sb == spread else
+        res.by_spread[float(sb)] = (out[key] if sb == spread else
                                     expected_lr_protocol(r, dataclasses.replace(best, spread=sb),
                                                          limits.dt))
         if progress is not None:
@@ -829,8 +872,8 @@ def verify_protocol(r: Rivals, pc: PowerCycle, n: int, *, seed: int = 1,
     from .multirun import joint_ml
 
     n_obs = sum(len(t) for t, _ in pc.runs)
-    out: dict[str, Any] = {"runs": n, "switch_ons": pc.k, "off_hours": pc.off / 3600.0,
-                           "spread": pc.spread}
+    out: dict[str, Any] = {"runs": n, "switch_ons": pc.k, "run_hours": list(pc.hours),
+                           "off_hours": pc.off / 3600.0, "spread": pc.spread}
     for j, truth in enumerate((r.a, r.b)):
         other = r.b if truth == r.a else r.a
         mt, pt = r.side(truth)
