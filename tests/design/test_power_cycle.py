@@ -105,7 +105,7 @@ def test_the_command_designs_and_verifies_a_power_cycle(tmp_path):
     pc = doc["power_cycle"]
     assert pc["assumptions"]["bias_spread"] == 0.05
     assert pc["gain"] >= 4.0, pc
-    assert pc["protocol"]["runs"] == 2 and pc["protocol"]["off_hours"] == 12.0
+    assert pc["protocol"]["run_hours"] == [1.0, 1.0] and pc["protocol"]["off_hours"] == 24.0
     gains = [x["gain"] for x in pc["by_spread"]]
     assert [x["bias_spread"] for x in pc["by_spread"]] == [0.03, 0.05, 0.1, 0.3]
     assert gains == sorted(gains, reverse=True)
@@ -116,16 +116,22 @@ def test_the_command_designs_and_verifies_a_power_cycle(tmp_path):
         rows = list(csv.DictReader(fh))
     assert {r["power"] for r in rows} == {"0", "1"}
     on = [float(r["time_s"]) for r in rows if r["power"] == "1"]
-    assert on[0] == 0.0 and max(on) == pytest.approx((1 + 12 + 1) * 3600.0)
-    assert "simulate:" in (out / "simulate_power_cycle.yaml").read_text()
+    assert on[0] == 0.0 and max(on) == pytest.approx((1 + 24 + 1) * 3600.0)
+    assert (out / "simulate_power_cycle.yaml").read_text().count("\nsimulate:") == 2
 
 
-def test_no_spread_says_how_to_design_the_power_cycle():
-    """Without a spread the time-only rivals' output names the option."""
-    from gyrostand.cli.design_separate import power_cycle_lines  # noqa: F401 (importable)
-    from gyrostand.core.separation import SeparationResult
+def test_the_splits_tried_keep_the_powered_on_budget():
+    """Equal splits of at least an hour and a long first run with one or two 1-h runs
+    after it, every split summing to the budget."""
+    from gyrostand.core.separation import protocol_splits
 
-    assert "power_cycle" in SeparationResult.__dataclass_fields__
+    lim = ChamberLimits(0, 50, 1 / 60, 600, 6 * 3600, legs=6)
+    splits = protocol_splits(lim)
+    assert splits == [(3.0, 3.0), (2.0, 2.0, 2.0), (1.5, 1.5, 1.5, 1.5), (5.0, 1.0),
+                      (4.0, 1.0, 1.0)]
+    assert all(sum(s) == pytest.approx(6.0) for s in splits)
+    pc = power_cycle(lim, [5.0, 1.0], 24 * 3600.0, 0.1)
+    assert pc.starts == (0.0, 29 * 3600.0) and pc.chamber_hours == pytest.approx(30.0)
 
 
 @pytest.mark.slow
