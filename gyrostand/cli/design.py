@@ -32,7 +32,8 @@ def add_parser(sub: Any) -> None:
                         "run's current model)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter's current value (e.g. temp_rate.k=5); every parameter "
-                        "of --model without a run; overrides the run's fit")
+                        "of --model without a run; overrides the run's fit; with --separate, "
+                        "bias.spread=SIGMA_B: the turn-on-to-turn-on spread of the bias")
     p.add_argument("--t-min", type=float, default=0.0, help="chamber minimum, °C (0)")
     p.add_argument("--t-max", type=float, default=50.0, help="chamber maximum, °C (50)")
     p.add_argument("--max-rate", type=number(positive=True), default=1.0,
@@ -53,6 +54,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--separate", nargs=2, default=None, metavar=("A", "B"),
                    help="design the run that tells the look-alike terms A and B apart "
                         "(e.g. temp_lag markov2): the model with A vs the model with B")
+    p.add_argument("--off-hours", type=number(positive=True), default=24.0,
+                   help="--separate of time-only effects (trend warmup) with a turn-on bias "
+                        "spread (--param bias.spread=SIGMA_B): the longest off period between "
+                        "switch-ons of the power-cycle protocol, h (24; chamber soak with the "
+                        "gyro unpowered, not counted in --hours)")
+    p.add_argument("--spread-from", default=None, metavar="JSON",
+                   help="the turn-on bias spread from `gyrostand identify RUN RUN ... --format "
+                        "json` (its repeatability), instead of --param bias.spread=")
     p.add_argument("--doubt", default=None,
                    help="the parameters in doubt, comma-separated (default: every one)")
     p.add_argument("--evaluations", type=int, default=120,

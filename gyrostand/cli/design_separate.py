@@ -33,6 +33,8 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
     from ..errors import ModelError
 
     a, b = args.separate
+    given = dict(given)
+    spread = _spread(args, given)
     reference_record = None
     if args.run is not None:
         from ..core.ml import ml
@@ -67,6 +69,15 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
         with progress.stage("design", f"switch-ons: {a} vs {b} over split runs",
                             unit="splits") as bar:
             res.switch_ons = separate_switch_ons(riv, limits, progress=bar.update)
+        if spread is not None:
+            from ..core.separation import SPREADS, separate_power_cycle
+
+            with progress.stage("design", f"power cycles: {a} vs {b}, sigma_b {spread:g}",
+                                total=None, unit="protocols") as bar:
+                res.power_cycle = separate_power_cycle(
+                    riv, limits, spread, max_off=args.off_hours * 3600.0,
+                    reference=res.reference_expected,
+                    spreads=sorted({*SPREADS, spread}), progress=bar.update)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     case = case_temperature(res.program.setpoint(limits.duration), limits)
@@ -76,6 +87,9 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
                 reference_record, res.reference_label,
                 f"{a} vs {b}: expected LR {total:.3g} designed vs {ref_total:.3g} "
                 f"({res.reference_label})")
+    pcr = res.power_cycle
+    if pcr is not None:
+        write_power_cycle(out, pcr, limits)
     if args.verify > 0:
         records: dict[str, Any] = {"designed": (limits.grid, case),
                                    "reference": reference_record or (limits.grid, ref_case)}
@@ -85,6 +99,13 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
                             unit="runs") as bar:
             res.verify = verify(riv, records, args.verify, seed=args.seed,
                                 progress=bar.update)
+        if pcr is not None:
+            from ..core.separation import verify_protocol
+
+            with progress.stage("design", "verify the power cycle", total=2 * args.verify,
+                                unit="sets") as bar:
+                pcr.verify = verify_protocol(riv, pcr.best, args.verify, seed=args.seed,
+                                             progress=bar.update)
     doc = document(res, limits)
     (out / "design.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if args.json:
@@ -125,6 +146,8 @@ def document(res, limits) -> dict[str, Any]:
             "best": res.switch_ons.best, "gain": _finite(res.switch_ons.gain),
             "target_gain": TARGET_GAIN,
         },
+        "power_cycle": (None if res.power_cycle is None
+                        else power_cycle_document(res.power_cycle)),
     }
 
 
@@ -149,6 +172,13 @@ def render(res, limits, out: Path) -> str:
                       f"{lam[r.b]:.4g})"]
     if res.switch_ons is not None:
         lines += switch_on_lines(res)
+        if res.power_cycle is not None:
+            lines += power_cycle_lines(res)
+        else:
+            lines.append(f"   a power-cycle protocol separates them through the level at each "
+                         f"switch-on: give the turn-on bias spread (--param "
+                         f"{SPREAD_PARAM}=SIGMA_B, the repeatability of `gyrostand identify "
+                         f"RUN RUN ...`, or --spread-from its JSON) to design it")
     if res.verify is not None:
         v = res.verify
         lines += ["", f"verify: {v['runs']} simulated runs from each model on each profile, "
@@ -205,4 +235,150 @@ def switch_on_lines(res) -> list[str]:
                      + ("." if res.longer is None else
                         f": {res.longer[0]:g} h give an expected LR of "
                         f"{sum(res.longer[1].values()):.4g}."))
+    return lines
+
+
+#: the name of the turn-on bias spread σ_b among ``--param`` (not a model parameter: the
+#: power-cycle protocol's random-effect spread of ``bias.b``)
+SPREAD_PARAM = "bias.spread"
+
+
+def _spread(args: argparse.Namespace, given: dict[str, float]) -> float | None:
+    """σ_b from ``--param bias.spread=…`` (removed from ``given``), else from
+    ``--spread-from`` (the JSON of ``identify RUN RUN … --format json``: its
+    repeatability's spread), else None."""
+    from ..errors import ModelError
+
+    if SPREAD_PARAM in given:
+        value = given.pop(SPREAD_PARAM)
+        if not value > 0:
+            raise ModelError(f"--param {SPREAD_PARAM}={value:g}: the turn-on bias spread "
+                             "must be > 0")
+        return float(value)
+    source = getattr(args, "spread_from", None)
+    if source is None:
+        return None
+    try:
+        doc = json.loads(Path(source).read_text(encoding="utf-8"))
+        value = float(doc["repeatability"]["spread"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelError(f"--spread-from {source}: no repeatability spread in it (the JSON "
+                         f"of `gyrostand identify RUN RUN ... --format json`): {exc}") from None
+    if not value > 0:
+        raise ModelError(f"--spread-from {source}: the repeatability spread is {value:g}; "
+                         f"give --param {SPREAD_PARAM}=VALUE (e.g. its interval's upper end)")
+    return value
+
+
+def write_power_cycle(out: Path, pcr, limits) -> None:
+    """power_cycle.csv (time / set-point / power of the whole protocol, off periods held
+    at the next run's start temperature) and simulate_power_cycle.yaml (one ``simulate:``
+    document per switch-on, its program)."""
+    from ..core.design import standard_cycle
+    from ..core.separation import run_limits_of
+
+    pc = pcr.best
+    docs = []
+    with open(out / "power_cycle.csv", "w", encoding="utf-8", newline="") as fh:
+        fh.write("time_s,setpoint_degC,power\n")
+        for r, (start, h) in enumerate(zip(pc.starts, pc.hours, strict=True)):
+            run = run_limits_of(limits, h * 3600.0)
+            prog = standard_cycle(run)
+            cut = prog.setpoint(run.duration)  # a short run's cycle is cut at its duration
+            rows = list(zip(cut.times, cut.temps, strict=True))
+            for t, T in rows:
+                fh.write(f"{start + t:.1f},{T:.3f},1\n")
+            end = start + run.duration
+            if rows[-1][0] < run.duration:
+                fh.write(f"{end:.1f},{rows[-1][1]:.3f},1\n")
+            fh.write(f"{end:.1f},{rows[-1][1]:.3f},0\n")
+            if r < pc.k - 1:
+                nxt = standard_cycle(run_limits_of(limits, pc.hours[r + 1] * 3600.0)).start
+                fh.write(f"{end + pc.off:.1f},{nxt:.3f},0\n")
+            lines = [f"# switch-on {r + 1} of {pc.k}: {h:g} h powered on"
+                     + (f", then the gyro off for {pc.off / 3600:g} h" if r < pc.k - 1 else ""),
+                     "simulate:", f"  duration: {run.duration:g}", "  temperature:"]
+            lines += [f"    - [{round(t, 1):g}, {round(T, 4):g}]" for t, T in rows]
+            docs.append("\n".join(lines))
+    head = ("# gyrostand design --separate: the power-cycle protocol, one simulate: document "
+            "per switch-on\n")
+    (out / "simulate_power_cycle.yaml").write_text(head + "\n---\n".join(docs) + "\n",
+                                                   encoding="utf-8")
+
+
+def power_cycle_document(pcr) -> dict[str, Any]:
+    pc = pcr.best
+    return {
+        "assumptions": {
+            "bias_spread": pcr.spread,
+            "turn_on_bias": "random effect: b_r = mu + u_r, u_r ~ N(0, bias_spread^2)",
+            "trend": "keeps its rate in absolute time across the off periods",
+            "warmup": "restarts at every switch-on with the same A and tau",
+            "off_periods": "chamber soak with the gyro unpowered",
+        },
+        "tried": [{"run_hours": list(hours), "off_hours": off, "expected_lr": _lr(lam)}
+                  for (hours, off), lam in pcr.expected.items()],
+        "protocol": {"runs": pc.k, "run_hours": list(pc.hours), "off_hours": pc.off / 3600.0,
+                     "chamber_hours": pc.chamber_hours,
+                     "switch_on_hours": [s / 3600.0 for s in pc.starts]},
+        "expected_lr": _lr(pcr.best_expected),
+        "reference_expected_lr": _lr(pcr.reference),
+        "gain": _finite(pcr.gain),
+        "by_spread": [{"bias_spread": sb, "expected_lr": _lr(lam), "gain": _finite(pcr.gain_at(sb))}
+                      for sb, lam in pcr.by_spread.items()],
+        "target_gain": TARGET_GAIN,
+        "verify": pcr.verify,
+    }
+
+
+def power_cycle_lines(res) -> list[str]:
+    """The power-cycle protocol: its assumptions in words, the protocols tried, the
+    chosen one and its gain over the standard cycle, the gain at other spreads."""
+    r, pcr = res.rivals, res.power_cycle
+    pc = pcr.best
+    ref = sum(pcr.reference.values())
+    lines = ["", f"power-cycle protocol: what separates {r.a} and {r.b} is the level at each "
+                 "switch-on. Assumed:",
+             f"  - the turn-on bias varies from switch-on to switch-on with spread sigma_b = "
+             f"{pcr.spread:g} (a random effect around one mean; the runs' repeatability);",
+             "  - an ageing/settling trend keeps its rate in absolute time while the gyro "
+             "is off;",
+             "  - a warm-up restarts at every switch-on, with the same amplitude and time "
+             "constant (the same gyro, the same self-heating);",
+             "  - the off periods are chamber soak with the gyro unpowered; the powered-on "
+             f"hours stay {sum(pc.hours):g} h.",
+             f"  {'runs, h each':>16} {'off h':>6} {r.a:>12} {r.b:>12} {'sum':>10} "
+             f"{'gain':>8}"]
+    for (hours, off), lam in pcr.expected.items():
+        tot = sum(lam.values())
+        mark = "  <- chosen" if (hours, off) == pc.key else ""
+        lines.append(f"  {' + '.join(f'{h:g}' for h in hours):>16} {off:>6.3g} "
+                     f"{lam[r.a]:>12.4g} "
+                     f"{lam[r.b]:>12.4g} {tot:>10.4g} "
+                     f"{tot / ref if ref > 0 else math.inf:>8.1f}{mark}")
+    best = pcr.best_expected
+    lines.append(f"-> {pc.k} switch-ons of {' + '.join(f'{h:g}' for h in pc.hours)} h, "
+                 f"{pc.off / 3600:g} h off between "
+                 f"them ({pc.chamber_hours:g} h in the chamber): expected LR "
+                 f"{sum(best.values()):.4g} ({r.a} {best[r.a]:.3g}, {r.b} {best[r.b]:.3g}) vs "
+                 f"{ref:.3g} for one standard cycle: gain {pcr.gain:.1f}x (the choice: the "
+                 f"largest expected LR of the weaker direction)")
+    lines.append("   the same protocol at other spreads: " + ", ".join(
+        f"sigma_b {sb:g}: gain {pcr.gain_at(sb):.1f}x ({r.a} {lam[r.a]:.3g}, {r.b} "
+        f"{lam[r.b]:.3g})" for sb, lam in pcr.by_spread.items()))
+    if pcr.verify is not None:
+        v = pcr.verify
+        lines.append(f"   verify: {v['runs']} simulated sets from each model under the "
+                     "protocol, both fitted by its joint ML:")
+        for truth in (r.a, r.b):
+            x = v[truth]
+            if x["mean_lr"] is None:
+                lines.append(f"     data from {truth}: every fit failed")
+                continue
+            lines.append(f"     data from {truth:<8} right wins {100 * x['right_wins_lr']:.0f} "
+                         f"% by LR, {100 * x['right_wins_bic']:.0f} % by BIC; mean LR "
+                         f"{x['mean_lr']:.3g}" + (f" ({x['failed']} fits failed)"
+                                                   if x["failed"] else ""))
+    lines.append("   files: power_cycle.csv (time, set-point, power), "
+                 "simulate_power_cycle.yaml (each switch-on's program)")
     return lines

@@ -44,14 +44,15 @@ from ..errors import DataError, IdentificationError
 from .data import Samples
 from .ml import _lsq_beta, _optimise, _Problem, _start_grid, _starts_from, concentrated_loglik
 from .ml_cov import observed_covariance
-from .model import Model
+from .model import LOG_2PI, Model
 from .results import Estimate, FitResult, _jsonable
 from .validate import prepare, require_samples
 
 log = logging.getLogger(__name__)
 
 __all__ = ["JointFit", "JointDiagnosis", "Repeatability", "joint_ml", "joint_diagnose",
-           "repeatability", "run_key", "per_run_names", "REPEATABILITY_PARAM"]
+           "repeatability", "run_key", "per_run_names", "shared_params",
+           "REPEATABILITY_PARAM"]
 
 #: the parameter whose spread over the runs is the turn-on-to-turn-on repeatability
 REPEATABILITY_PARAM = "bias.b"
@@ -70,6 +71,19 @@ def base_name(key: str) -> str:
     return key.split("@", 1)[0]
 
 
+#: the turn-on bias and the trend's rate (the power-cycle protocol's parameters)
+BIAS, TREND = "bias.b", "trend.c"
+
+
+def shared_params(model: Model, terms: Sequence[str]) -> tuple[str, ...]:
+    """The parameters of the per-run ``terms`` (e.g. ``warmup``) that a protocol shares
+    over its switch-ons instead (the same gyro's self-heating at every switch-on)."""
+    unknown = [t for t in terms if t not in model.names]
+    if unknown:
+        raise DataError(f"shared terms {', '.join(unknown)} are not in the model {model}")
+    return tuple(n for n in model.param_names if n.split(".", 1)[0] in terms)
+
+
 def per_run_names(model: Model) -> tuple[str, ...]:
     """The model's parameters each run has its own of (its per-run terms' parameters)."""
     return tuple(n for n in model.param_names if getattr(model.term_of(n), "per_run", False))
@@ -80,13 +94,33 @@ class _JointProblem:
     :class:`~gyrostand.core.ml._Problem` (what the search and the covariance use), with
     every per-run parameter once per run under :func:`run_key`."""
 
-    def __init__(self, model: Model, runs: Sequence[Samples], fixed: Mapping[str, float]):
+    def __init__(self, model: Model, runs: Sequence[Samples], fixed: Mapping[str, float],
+                 *, bias_spread: float | None = None, shared: Sequence[str] = (),
+                 absolute_time: bool = False):
         self.model = model
         self.parts = [_Problem(model, s, fixed) for s in runs]
         first = self.parts[0]
         self.fixed = first.fixed
         self.n_runs = len(self.parts)
-        self.per_run = set(per_run_names(model))
+        self.per_run = set(per_run_names(model)) - set(shared_params(model, shared))
+        #: the power-cycle protocol's options (:func:`joint_ml_fit`): the turn-on bias a
+        #: random effect of spread σ_b around a shared mean, the trend in absolute time
+        self.spread = None if bias_spread is None else float(bias_spread)
+        self.offsets = np.zeros(self.n_runs)
+        self.bias_col = self.trend_col = None
+        if self.spread is not None or absolute_time:
+            if BIAS not in first.lin_free:
+                raise DataError("a random-effect turn-on bias and absolute time need the "
+                                "model's free bias term")
+            self.bias_col = 1 + first.linear.index(BIAS)
+        if self.spread is not None:
+            if not self.spread >= 0:
+                raise DataError(f"the turn-on bias spread must be >= 0, got {self.spread}")
+            self.per_run.discard(BIAS)
+        if absolute_time and TREND in first.lin_free:
+            self.trend_col = 1 + first.linear.index(TREND)
+            t0 = min(float(s.t[0]) for s in runs)
+            self.offsets = np.array([float(s.t[0]) - t0 for s in runs])
         # noise scale and reference are decided by the model and the fixed values alone
         self.concentrate, self.ref, self.ref_scale = first.concentrate, first.ref, first.ref_scale
         self.stds = list(first.stds)
@@ -166,12 +200,18 @@ class _JointProblem:
         slogf = 0.0
         n = 0
         ps = []
+        grams = []
         for r, part in enumerate(self.parts):
             p = part.unpack(self.part_z(z, r))
             G, slogf_r, n_r = part.gram(p)
             if not np.isfinite(slogf_r):
                 return -np.inf, None
             ps.append(p)
+            if self.spread is not None or self.trend_col is not None:
+                grams.append(self.shifted(G, r))
+                slogf += slogf_r
+                n += n_r
+                continue
             c0 = np.zeros(G.shape[0])
             c0[0] = 1.0
             for j, name in enumerate(part.linear):
@@ -185,6 +225,8 @@ class _JointProblem:
                 b[idx] += G[free] @ c0
             slogf += slogf_r
             n += n_r
+        if grams:
+            return self._profile_random(grams, slogf, n, ps)
         if L:
             theta, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
             S -= float(b @ theta)
@@ -193,8 +235,138 @@ class _JointProblem:
         ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
         return ll, (ps, theta, s2, A)
 
+    # -- the power-cycle protocol: absolute time, random-effect turn-on bias ----------
+
+    def shifted(self, G: np.ndarray, r: int) -> np.ndarray:
+        """Run ``r``'s Gram matrix with the trend's column counted from the first
+        switch-on: x_c + δ_r·1 (the filter is linear: G → M'GM)."""
+        if self.trend_col is None or self.offsets[r] == 0.0:
+            return G
+        M = np.eye(G.shape[0])
+        M[self.bias_col, self.trend_col] = self.offsets[r]
+        return M.T @ G @ M
+
+    def _gls(self, grams: Sequence[np.ndarray], rho: float
+             ) -> tuple[float, float, np.ndarray, np.ndarray]:
+        """At ρ = σ_b²/s²: (S, Σ_r ln(1 + ρ h_r), θ̂, A) of the GLS with each run's
+        V_r ∝ Σ̃_r + ρ 11' (Woodbury on its Gram matrix; ρ = inf: a free bias per run)."""
+        L = len(self.lin_free)
+        A = np.zeros((L, L))
+        bv = np.zeros(L)
+        S = 0.0
+        logdet = 0.0
+        c = self.bias_col
+        assert c is not None
+        for r, G in enumerate(grams):
+            h = float(G[c, c])
+            if self.spread is not None and h > 0:
+                if np.isinf(rho):
+                    G = G - np.outer(G[:, c], G[c]) / h
+                else:
+                    G = G - rho * np.outer(G[:, c], G[c]) / (1.0 + rho * h)
+                    logdet += float(np.log1p(rho * h))
+            c0 = np.zeros(G.shape[0])
+            c0[0] = 1.0
+            part = self.parts[r]
+            for j, name in enumerate(part.linear):
+                if name in part.fixed:
+                    c0[1 + j] = -part.fixed[name]
+            S += float(c0 @ G @ c0)
+            free = part.free_cols
+            if free:
+                idx = self.lin_index[r]
+                A[np.ix_(idx, idx)] += G[np.ix_(free, free)]
+                bv[idx] += G[free] @ c0
+        if L:  # equilibrated: a trend counted from the first switch-on has a large column
+            d = np.diag(A)
+            d = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
+            x, *_ = np.linalg.lstsq(A * np.outer(d, d), bv * d, rcond=1e-13)
+            theta = x * d
+            S -= float(bv @ theta)
+        else:
+            theta = np.zeros(0)
+        return max(S, 1e-300), logdet, theta, A
+
+    def _profile_random(self, grams, slogf: float, n: int, ps):
+        """The concentrated joint ln L with the random-effect bias: V_r = s²(Σ̃_r + ρ11'),
+        ρ = σ_b²/s², σ_b known; with the common scale concentrated, ln L is maximized over
+        s² (one dimension: ρ moves with s²)."""
+        from scipy.optimize import minimize_scalar
+
+        sb2 = (self.spread or 0.0) ** 2
+
+        def ll_at(s2: float) -> tuple[float, tuple]:
+            S, logdet, theta, A = self._gls(grams, sb2 / s2)
+            ll = -0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + logdet + S / s2)
+            return float(ll), (ps, theta, s2, A)
+
+        if not self.concentrate:
+            return ll_at(1.0)
+        hi = self._gls(grams, 0.0)[0] / n
+        lo = self._gls(grams, np.inf)[0] / n if sb2 > 0 else hi
+        if not hi > lo * (1 + 1e-12):
+            return ll_at(hi)
+        res = minimize_scalar(lambda x: -ll_at(float(np.exp(x)))[0],
+                              bounds=(np.log(lo) - 0.01, np.log(hi) + 0.01), method="bounded",
+                              options={"xatol": 1e-10})
+        return ll_at(float(np.exp(res.x)))
+
+    def random_effects(self, p: Mapping[str, float]) -> list[float]:
+        """Each run's turn-on bias at natural joint parameters ``p``: μ + δ_r c + û_r,
+        û_r = E[u_r | run r] (the BLUP, 0 without a random effect), for the run's own
+        parameters (its residuals, its ln L at the joint estimate)."""
+        out = []
+        for r, part in enumerate(self.parts):
+            q = self.run_params(p, r)
+            base = q[BIAS] + (self.offsets[r] * q[TREND] if self.trend_col is not None
+                              else 0.0)
+            u = 0.0
+            if self.spread is not None and self.spread > 0:
+                G = self.shifted(part.gram(q)[0], r)
+                c = self.bias_col
+                assert c is not None
+                cvec = np.zeros(G.shape[0])
+                cvec[0] = 1.0
+                for j, name in enumerate(part.linear):
+                    cvec[1 + j] = -q[name]
+                h = float(G[c, c])
+                sb2 = self.spread ** 2
+                u = sb2 * float(G[c] @ cvec) / (1.0 + sb2 * h)
+            out.append(base + u)
+        return out
+
+    def random_loglik(self, p: Mapping[str, float]) -> list[float]:
+        """Each run's exact ln L at natural joint parameters ``p`` (nothing concentrated),
+        its turn-on bias integrated out: −½[n ln 2π + ln det Σ_r + ln(1 + σ_b² h_r) + r'V⁻¹r]."""
+        out = []
+        sb2 = (self.spread or 0.0) ** 2
+        for r, part in enumerate(self.parts):
+            q = self.run_params(p, r)
+            G, slogf, n = part.gram(q)
+            if not np.isfinite(slogf):
+                out.append(-np.inf)
+                continue
+            G = self.shifted(G, r)
+            c = self.bias_col
+            assert c is not None
+            cvec = np.zeros(G.shape[0])
+            cvec[0] = 1.0
+            for j, name in enumerate(part.linear):
+                cvec[1 + j] = -q[name]
+            h = float(G[c, c])
+            quad = float(cvec @ G @ cvec)
+            logdet = 0.0
+            if sb2 > 0:
+                gc = float(G[c] @ cvec)
+                quad -= sb2 * gc * gc / (1.0 + sb2 * h)
+                logdet = float(np.log1p(sb2 * h))
+            out.append(float(-0.5 * (n * LOG_2PI + slogf + logdet + quad)))
+        return out
+
     def full_loglik(self, p: Mapping[str, float]) -> float:
         """Exact joint ln L at natural joint parameters ``p`` (nothing concentrated)."""
+        if self.bias_col is not None:
+            return float(sum(self.random_loglik(p)))
         total = 0.0
         for r, part in enumerate(self.parts):
             total += part.full_loglik(self.run_params(p, r))
@@ -407,17 +579,36 @@ def joint_ml(runs: Sequence[Samples], model: Model, **options: Any) -> JointFit:
 def joint_ml_fit(runs: Sequence[Samples], model: Model, *, sigma: float | None = None,
                  fixed: Mapping[str, float] | None = None, n_local: int | None = None,
                  start: Mapping[str, float] | None = None, std_errors: bool = True,
-                 hessian_passes: int = 2) -> JointFit:
+                 hessian_passes: int = 2, bias_spread: float | None = None,
+                 shared: Sequence[str] = (), absolute_time: bool = False) -> JointFit:
     """Joint exact ML over several runs: options as :func:`~gyrostand.core.ml.ml_fit`
     (``start`` by joint name: a per-run parameter as :func:`run_key`, or by its model name
-    for every run)."""
+    for every run).
+
+    The power-cycle protocol's options (the defaults leave the fit as above, bit for bit):
+
+    * ``bias_spread`` σ_b: the turn-on bias is a random effect, b_r = μ + u_r with
+      u_r ~ N(0, σ_b²) independent of everything else, around one shared mean μ
+      (``bias.b``), σ_b known (the repeatability of earlier runs). Run r's likelihood
+      integrates u_r out exactly: its covariance is V_r = Σ_r + σ_b² 11' (Σ_r the
+      Kalman model's), by Woodbury on the filtered Gram matrix,
+      ln L_r = −½[n_r ln 2π + ln det Σ_r + ln(1 + σ_b² 1'Σ_r⁻¹1) + e'V_r⁻¹e].
+      σ_b → ∞ gives the free per-run bias (up to −½ ln(σ_b² 1'Σ_r⁻¹1) per run), σ_b = 0
+      one bias for every run. Each run's reported bias is μ + û_r (the BLUP).
+    * ``absolute_time``: the runs' times are on one clock (each record's t[0] its
+      switch-on); the trend c·(t − t₀) counts from the first switch-on, so it keeps its
+      rate across the off periods (ageing), while a warm-up still restarts at each
+      switch-on.
+    * ``shared``: per-run terms shared by the switch-ons instead (``["warmup"]``: the
+      same A and τ at every switch-on of one protocol)."""
     if not runs:
         raise DataError("a joint fit needs at least one run")
     fixed = dict(fixed or {})
     if sigma is not None:
         fixed["markov.sigma"] = float(sigma)
     runs = [prepare(s, "ml") for s in runs]
-    prob = _JointProblem(model, runs, fixed)
+    prob = _JointProblem(model, runs, fixed, bias_spread=bias_spread, shared=shared,
+                         absolute_time=absolute_time)
     n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
     for s in runs:
         require_samples(s, s.n_observed, len(prob.per_run) + 2, "ml")
@@ -441,7 +632,11 @@ def joint_ml_fit(runs: Sequence[Samples], model: Model, *, sigma: float | None =
     warnings += more
     at_bound = list(info.get("at_bound", []))
     p, gls_info, _ = prob.natural(z)
-    lls = [model.loglik(prob.run_params(p, r), s) for r, s in enumerate(runs)]
+    if prob.bias_col is None:
+        lls = [model.loglik(prob.run_params(p, r), s) for r, s in enumerate(runs)]
+    else:
+        lls = prob.random_loglik(p)
+        own_bias = prob.random_effects(p)
     if not all(np.isfinite(lls)):
         raise IdentificationError("ml found no finite joint likelihood of "
                                   + "; ".join(s.source for s in runs))
@@ -466,6 +661,10 @@ def joint_ml_fit(runs: Sequence[Samples], model: Model, *, sigma: float | None =
             params[k] = Estimate(float(p[k]), std[k], model.unit(n))
     info.update({"evaluations": prob.nevals, "concentrated_scale": prob.concentrate,
                  "start_points": len(starts), "runs": len(runs)})
+    if prob.bias_col is not None:
+        info.update({"bias_spread": prob.spread, "absolute_time": absolute_time,
+                     "shared": list(shared),
+                     "switch_on_offsets_s": [float(x) for x in prob.offsets]})
     results = []
     for r, s in enumerate(runs):
         own = {n: params[run_key(n, r)] if run_key(n, r) in params else params[n]
@@ -474,7 +673,11 @@ def joint_ml_fit(runs: Sequence[Samples], model: Model, *, sigma: float | None =
                    if "@" not in k or k.endswith(f"@{r + 1}")]
         rows = [i for i, k in enumerate(free) if "@" not in k or k.endswith(f"@{r + 1}")]
         cov_r = cov[np.ix_(rows, rows)] if cov is not None else None
-        e, f = model.innovations(prob.run_params(p, r), s)
+        q = prob.run_params(p, r)
+        if prob.bias_col is not None:  # this run's own turn-on bias (trend at its origin)
+            q[BIAS] = own_bias[r]
+            own[BIAS] = Estimate(own_bias[r], 0.0, model.unit(BIAS))
+        e, f = model.innovations(q, s)
         check = residual_check(e, f)
         if check["ljung_box_p"] < 0.01:
             warnings.append(f"run {r + 1} ({s.source}): innovations not white (Ljung–Box p = "
