@@ -94,6 +94,30 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
 
 
 
+class _Layout:
+    """What :meth:`FrameEncoder.signal_values` reads of one cantools message, read once:
+    per signal (in the message's order) its value when not given (the DBC initial value or
+    0), its range as floats, whether it is a float, its scale and offset, and its
+    multiplexer signal and ids; the same numbers the encoder read from the signals at
+    every frame before."""
+
+    __slots__ = ("msg", "names", "specs", "plain")
+
+    def __init__(self, msg: Message) -> None:
+        self.msg = msg
+        self.names = frozenset(s.name for s in msg.signals)
+        self.specs: dict[str, tuple[Any, float | None, float | None, bool, Any, Any,
+                                    str | None, Any]] = {}
+        for s in msg.signals:  # a repeated name: the first signal, as before
+            self.specs.setdefault(s.name, (
+                s.initial if s.initial is not None else 0,
+                None if s.minimum is None else float(s.minimum),
+                None if s.maximum is None else float(s.maximum),
+                bool(s.is_float), s.scale, s.offset, s.multiplexer_signal,
+                s.multiplexer_ids))
+        self.plain = not any(s.multiplexer_ids for s in msg.signals)
+
+
 def _wrap(value: int, sig) -> int:
     """Cumulative counts wrap modulo the signal's range (documented in dbc/README.md)."""
     top = int(sig.maximum) if sig.maximum is not None else (1 << sig.length) - 1
@@ -112,11 +136,32 @@ class FrameEncoder:
         self.db = db
         self.bus = bus
         self._codes: dict[tuple[str, str], dict[str, ValueCodes]] = {}
+        self._messages: dict[Any, Message] = {}
+        self._layouts: dict[str, _Layout] = {}
 
     def _message(self, ref: str | int | MessageRef) -> Message:
+        """The cantools message of ``ref``, looked up once per reference (a lookup that
+        fails is not kept: it raises again)."""
         if isinstance(ref, MessageRef):
-            return self.db.get_message_by_name(ref.name)
-        return find_message(self.db, ref)[1]
+            key: Any = ref
+        elif type(ref) in (str, int):
+            key = (type(ref), ref)  # 1 and "1" stay apart
+        else:  # not a reference: find_message says what is wrong with it
+            return find_message(self.db, ref)[1]
+        msg = self._messages.get(key)
+        if msg is None:
+            if isinstance(ref, MessageRef):
+                msg = self.db.get_message_by_name(ref.name)
+            else:
+                msg = find_message(self.db, ref)[1]
+            self._messages[key] = msg
+        return msg
+
+    def _layout(self, msg: Message) -> _Layout:
+        layout = self._layouts.get(msg.name)
+        if layout is None or layout.msg is not msg:
+            layout = self._layouts[msg.name] = _Layout(msg)
+        return layout
 
     def codes(self, ref: str | int | MessageRef, role: str) -> dict[str, ValueCodes]:
         """The checked value tables of message ``ref`` in ``role`` (``result``,
@@ -159,38 +204,43 @@ class FrameEncoder:
         :meth:`encode` would encode (defaults filled, inactive multiplexed signals left out).
         """
         msg = self._message(ref)
-        by_name = {s.name: s for s in msg.signals}
-        unknown = set(signals) - set(by_name)
-        if unknown:
+        layout = self._layout(msg)
+        if not layout.names.issuperset(signals):
+            unknown = set(signals) - layout.names
             raise CanEdgeError(f"message {msg.name} has no signal(s) {sorted(unknown)}")
         values: dict[str, float] = {}
+        specs = layout.specs
 
-        def value(sig) -> float:
-            if sig.name in values:
-                return values[sig.name]
-            v = signals.get(sig.name)
+        def value(name: str) -> float:
+            if name in values:
+                return values[name]
+            default, lo, hi, is_float, scale, offset, _, _ = specs[name]
+            v = signals.get(name)
             if v is None:
-                v = sig.initial if sig.initial is not None else 0
+                v = default
             v = float(v)
             if not math.isnan(v):
-                if sig.minimum is not None:
-                    v = max(v, float(sig.minimum))
-                if sig.maximum is not None:
-                    v = min(v, float(sig.maximum))
-            if not sig.is_float:
+                if lo is not None:
+                    v = max(v, lo)
+                if hi is not None:
+                    v = min(v, hi)
+            if not is_float:
                 if math.isnan(v):
-                    raise CanEdgeError(f"{msg.name}.{sig.name}: NaN in an integer signal")
-                v = int(round((v - sig.offset) / sig.scale)) * sig.scale + sig.offset
-            values[sig.name] = v
+                    raise CanEdgeError(f"{msg.name}.{name}: NaN in an integer signal")
+                v = int(round((v - offset) / scale)) * scale + offset
+            values[name] = v
             return v
 
-        def active(sig) -> bool:
-            if not sig.multiplexer_ids:
+        def active(name: str) -> bool:
+            _, _, _, _, _, _, mux, ids = specs[name]
+            if not ids:
                 return True
-            mux = by_name[sig.multiplexer_signal]
-            return active(mux) and int(value(mux)) in sig.multiplexer_ids
+            assert mux is not None  # a multiplexed signal names its multiplexer
+            return active(mux) and int(value(mux)) in ids
 
-        return msg, {s.name: value(s) for s in msg.signals if active(s)}
+        if layout.plain:
+            return msg, {name: value(name) for name in specs}
+        return msg, {name: value(name) for name in specs if active(name)}
 
     def send(self, frames: can.Message | Sequence[can.Message],
              timeout: float | None = 1.0) -> None:
