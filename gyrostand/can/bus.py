@@ -29,6 +29,7 @@ from gyrostand.can.codes import (
     role_codes,
 )
 from gyrostand.can.dbc import MessageRef, find_message
+from gyrostand.can.pack import packer
 from gyrostand.core.terms import VOCABULARY, summary_bits
 from gyrostand.errors import CanEdgeError
 
@@ -101,7 +102,7 @@ class _Layout:
     multiplexer signal and ids; the same numbers the encoder read from the signals at
     every frame before."""
 
-    __slots__ = ("msg", "names", "specs", "plain")
+    __slots__ = ("msg", "names", "specs", "plain", "_pack")
 
     def __init__(self, msg: Message) -> None:
         self.msg = msg
@@ -116,6 +117,14 @@ class _Layout:
                 bool(s.is_float), s.scale, s.offset, s.multiplexer_signal,
                 s.multiplexer_ids))
         self.plain = not any(s.multiplexer_ids for s in msg.signals)
+        self._pack: Any = False  # not built yet
+
+    def packer(self) -> Any:
+        """The message's payload packer (:func:`gyrostand.can.pack.packer`: cantools' bit
+        layout, checked against cantools when built), or None: cantools packs."""
+        if self._pack is False:
+            self._pack = packer(self.msg)
+        return self._pack
 
 
 def _wrap(value: int, sig) -> int:
@@ -190,10 +199,18 @@ class FrameEncoder:
                timestamp: float = 0.0) -> can.Message:
         """One frame of message ``ref`` carrying ``signals`` (physical values)."""
         msg, data = self.signal_values(ref, signals)
-        try:
-            payload = msg.encode(data, strict=False)
-        except Exception as exc:
-            raise CanEdgeError(f"cannot encode {msg.name} from {data}: {exc}") from exc
+        pack = self._layout(msg).packer()
+        payload = None
+        if pack is not None:  # cantools' bytes (checked), or None: cantools decides
+            try:
+                payload = pack(data)
+            except Exception:  # noqa: BLE001 - cantools raises its own error below
+                payload = None
+        if payload is None:
+            try:
+                payload = msg.encode(data, strict=False)
+            except Exception as exc:
+                raise CanEdgeError(f"cannot encode {msg.name} from {data}: {exc}") from exc
         return can.Message(arbitration_id=msg.frame_id, is_extended_id=msg.is_extended_frame,
                            data=payload, timestamp=timestamp, is_fd=bool(msg.is_fd),
                            is_rx=False)
