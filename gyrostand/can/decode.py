@@ -20,7 +20,6 @@ import math
 import threading
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, replace
 from typing import TYPE_CHECKING
 
 import can
@@ -33,7 +32,7 @@ from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
 if TYPE_CHECKING:
     from gyrostand.can.blfarray import FrameArrays
 from gyrostand.can.routes import ChannelMap, _decoder, _Route
-from gyrostand.can.rxstats import REASONS, Counts, DecodeStats, Rejections
+from gyrostand.can.rxstats import COUNT_FIELDS, REASONS, Counts, DecodeStats, Rejections
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
            "Sample", "Command", "MALFORMED", "UNRANGED_LIMIT", "Counts", "Rejections"]
@@ -772,11 +771,12 @@ class DecodingListener(can.Listener):
 
     def stats(self) -> DecodeStats:
         """A consistent snapshot of every counter (thread-safe)."""
-        with self._lock:
-            n = replace(self._n)
-            rej = asdict(self._rej)
+        with self._lock:  # flat int fields: what dataclasses.asdict gave, without its
+            n, r = self._n, self._rej  # deep copy (a heartbeat asks at every beat)
+            counts = {k: getattr(n, k) for k in COUNT_FIELDS}
+            rej = {k: getattr(r, k) for k in REASONS}
             steps, held = self._steps, len(self._held)
-        return DecodeStats(**asdict(n), rejected=rej, clock_steps=steps, held=held)
+        return DecodeStats(**counts, rejected=rej, clock_steps=steps, held=held)
 
     @property
     def last_timestamp(self) -> float:
