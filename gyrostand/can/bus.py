@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import can
@@ -102,7 +102,7 @@ class _Layout:
     multiplexer signal and ids; the same numbers the encoder read from the signals at
     every frame before."""
 
-    __slots__ = ("msg", "names", "specs", "plain", "_pack")
+    __slots__ = ("msg", "names", "specs", "values", "_pack")
 
     def __init__(self, msg: Message) -> None:
         self.msg = msg
@@ -116,7 +116,8 @@ class _Layout:
                 None if s.maximum is None else float(s.maximum),
                 bool(s.is_float), s.scale, s.offset, s.multiplexer_signal,
                 s.multiplexer_ids))
-        self.plain = not any(s.multiplexer_ids for s in msg.signals)
+        self.values: Callable[[Mapping[str, float]], dict[str, float]] = \
+            _compile_values(msg.name, self.specs)
         self._pack: Any = False  # not built yet
 
     def packer(self) -> Any:
@@ -125,6 +126,60 @@ class _Layout:
         if self._pack is False:
             self._pack = packer(self.msg)
         return self._pack
+
+
+def _compile_values(message: str, specs: dict[str, tuple]) -> Callable:
+    """``values(signals) -> {signal: value}`` of :meth:`FrameEncoder.signal_values`,
+    compiled once per message: per signal in the message's order, whether it is active
+    (its multiplexer active and holding one of its ids), then its value (given, else its
+    default; as a float; clamped into its range unless NaN; an integer signal rounded to
+    its scale's grid, NaN refused), each value computed once, when first needed, as the
+    per-frame closures did (the same operations on the same numbers, in the same order:
+    the same values, and the same first error)."""
+    env: dict[str, Any] = {"_U": object(), "_Err": CanEdgeError}
+    idx = {name: i for i, name in enumerate(specs)}
+    lines = ["def values(signals):", "    get = signals.get"]
+    lines += [f"    v{i} = _U" for i in range(len(specs))]
+
+    def ensure(name: str, ind: str) -> list[str]:
+        i = idx[name]
+        default, lo, hi, is_float, scale, offset, _, _ = specs[name]
+        env.update({f"_d{i}": default, f"_lo{i}": lo, f"_hi{i}": hi, f"_s{i}": scale,
+                    f"_o{i}": offset})
+        body = [f"x = get({name!r})", f"if x is None: x = _d{i}", "x = float(x)"]
+        clamp = ([f"    x = max(x, _lo{i})"] if lo is not None else []) + \
+            ([f"    x = min(x, _hi{i})"] if hi is not None else [])
+        if clamp:
+            body += ["if x == x:"] + clamp
+        if not is_float:
+            err = f"{message}.{name}: NaN in an integer signal"
+            body += [f"if x != x: raise _Err({err!r})",
+                     f"x = int(round((x - _o{i}) / _s{i})) * _s{i} + _o{i}"]
+        body.append(f"v{i} = x")
+        return [f"{ind}if v{i} is _U:"] + [f"{ind}    {b}" for b in body]
+
+    def active(name: str, out: str, ind: str) -> list[str]:
+        """Lines setting ``out`` to whether ``name`` is active."""
+        _, _, _, _, _, _, mux, ids = specs[name]
+        if not ids:
+            return [f"{ind}{out} = True"]
+        i = idx[name]
+        env[f"_ids{i}"] = ids
+        return active(mux, out, ind) + [f"{ind}if {out}:"] + ensure(mux, ind + "    ") + \
+            [f"{ind}    {out} = int(v{idx[mux]}) in _ids{i}"]
+
+    for name in specs:
+        i = idx[name]
+        if specs[name][7]:
+            lines += active(name, "a", "    ") + ["    if a:"] + ensure(name, "        ") + \
+                [f"        out[{name!r}] = v{i}"]
+        else:
+            lines += ensure(name, "    ") + [f"    out[{name!r}] = v{i}"]
+    lines.insert(2, "    out = {}")
+    lines.append("    return out")
+    exec(compile("\n".join(lines) + "\n", f"<gyrostand signal values {message}>", "exec"), env)
+    fn: Callable = env["values"]
+    return fn
 
 
 def _wrap(value: int, sig) -> int:
@@ -225,39 +280,7 @@ class FrameEncoder:
         if not layout.names.issuperset(signals):
             unknown = set(signals) - layout.names
             raise CanEdgeError(f"message {msg.name} has no signal(s) {sorted(unknown)}")
-        values: dict[str, float] = {}
-        specs = layout.specs
-
-        def value(name: str) -> float:
-            if name in values:
-                return values[name]
-            default, lo, hi, is_float, scale, offset, _, _ = specs[name]
-            v = signals.get(name)
-            if v is None:
-                v = default
-            v = float(v)
-            if not math.isnan(v):
-                if lo is not None:
-                    v = max(v, lo)
-                if hi is not None:
-                    v = min(v, hi)
-            if not is_float:
-                if math.isnan(v):
-                    raise CanEdgeError(f"{msg.name}.{name}: NaN in an integer signal")
-                v = int(round((v - offset) / scale)) * scale + offset
-            values[name] = v
-            return v
-
-        def active(name: str) -> bool:
-            _, _, _, _, _, _, mux, ids = specs[name]
-            if not ids:
-                return True
-            assert mux is not None  # a multiplexed signal names its multiplexer
-            return active(mux) and int(value(mux)) in ids
-
-        if layout.plain:
-            return msg, {name: value(name) for name in specs}
-        return msg, {name: value(name) for name in specs if active(name)}
+        return msg, layout.values(signals)
 
     def send(self, frames: can.Message | Sequence[can.Message],
              timeout: float | None = 1.0) -> None:

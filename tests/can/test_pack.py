@@ -98,3 +98,82 @@ def test_the_encoder_gives_cantools_frames(name, db):
                     enc.encode(message.name, noisy)
                 continue
             assert bytes(enc.encode(message.name, noisy).data) == want
+
+
+def _reference_signal_values(msg, signals):
+    """FrameEncoder.signal_values as it was written per frame (before it was compiled
+    per message): the reference the compiled one is held to."""
+    import math
+
+    from gyrostand.errors import CanEdgeError
+
+    by_name = {s.name: s for s in msg.signals}
+    unknown = set(signals) - set(by_name)
+    if unknown:
+        raise CanEdgeError(f"message {msg.name} has no signal(s) {sorted(unknown)}")
+    values: dict[str, float] = {}
+
+    def value(sig) -> float:
+        if sig.name in values:
+            return values[sig.name]
+        v = signals.get(sig.name)
+        if v is None:
+            v = sig.initial if sig.initial is not None else 0
+        v = float(v)
+        if not math.isnan(v):
+            if sig.minimum is not None:
+                v = max(v, float(sig.minimum))
+            if sig.maximum is not None:
+                v = min(v, float(sig.maximum))
+        if not sig.is_float:
+            if math.isnan(v):
+                raise CanEdgeError(f"{msg.name}.{sig.name}: NaN in an integer signal")
+            v = int(round((v - sig.offset) / sig.scale)) * sig.scale + sig.offset
+        values[sig.name] = v
+        return v
+
+    def active(sig) -> bool:
+        if not sig.multiplexer_ids:
+            return True
+        mux = by_name[sig.multiplexer_signal]
+        return active(mux) and int(value(mux)) in sig.multiplexer_ids
+
+    return {s.name: value(s) for s in msg.signals if active(s)}
+
+
+@pytest.mark.parametrize("name,db", _databases(), ids=[n for n, _ in _databases()])
+def test_signal_values_as_written_per_frame(name, db):
+    """The compiled signal_values gives the per-frame reference's dict (keys, order, values,
+    types) or its error, on random partial inputs: NaN, ±inf, out of range, ints, a
+    multiplexer value selecting no branch, an unknown signal."""
+    rng = random.Random(11)
+    enc = FrameEncoder(db)
+    specials = [float("nan"), float("inf"), -float("inf"), 0, -0.0, 1e300, -1e300, 3, 0.5]
+    for message in db.messages:
+        if message.is_container:
+            continue
+        names = [s.name for s in message.signals]
+        for values in draws(message, rng, 60):
+            given = {k: v for k, v in values.items() if rng.random() < 0.7}
+            for k in list(given):
+                r = rng.random()
+                if r < 0.15:
+                    given[k] = rng.choice(specials)
+                elif r < 0.3:
+                    given[k] = given[k] * rng.uniform(-3, 3) if given[k] == given[k] else 1.0
+            if rng.random() < 0.1 and names:
+                given[rng.choice(names)] = rng.randint(0, 20)  # maybe no branch
+            if rng.random() < 0.03:
+                given["NoSuchSignal"] = 1.0
+            try:
+                want: object = _reference_signal_values(message, given)
+            except Exception as exc:  # noqa: BLE001
+                want = (type(exc), str(exc))
+            try:
+                got: object = enc.signal_values(message.name, given)[1]
+            except Exception as exc:  # noqa: BLE001
+                got = (type(exc), str(exc))
+            assert repr(got) == repr(want), (name, message.name, given)
+            if isinstance(got, dict):
+                assert [type(v) for v in got.values()] == \
+                    [type(v) for v in want.values()]  # type: ignore[attr-defined]
