@@ -19,7 +19,14 @@ cache written):
   Its maximized ln L is printed beside ours: the same likelihood, so the same fit.
   It is timed twice: with its kernels cached (``@njit(cache=True)``, loaded like ours),
   and as a plain script is usually written (``@njit``, compiled in every run: how the
-  issue's independent script was measured at 3.3 s).
+  issue's independent script was measured at 3.3 s);
+* the floor under both: a script that only imports numpy and numba and calls one cached
+  ``@njit(cache=True)`` kernel (numba's first cached kernel builds its typing and target
+  registries and, through its BLAS check, imports scipy.linalg), and the same plus
+  ``import scipy.optimize`` (the optimizer both fits use). What ``identify`` spends above
+  the floor is printed, with the 0.5 x anchor target beside it;
+* where ``identify``'s time goes, in one process: imports, reading the CSV, the first
+  kernel load, the fit and the JSON output (medians over the runs).
 
 The CSV: ``gyrostand.core.simulate`` of ``markov,temp,bias`` on ``chamber_profile(6 h)``
 (21,601 one-second samples, seed 1), in a temporary folder.
@@ -126,6 +133,70 @@ print(json.dumps({"loglik": -float(res.fun), "nfev": int(res.nfev),
 '''
 
 
+FLOOR = r'''
+"""The floor of any numba command: interpreter, numpy, numba, one cached kernel."""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def total(x):
+    s = 0.0
+    for v in x:
+        s += v
+    return s
+
+
+print(total(np.ones(3)))
+'''
+
+#: ``identify``'s phases in one process (seconds as JSON), in the order the command meets
+#: them: its parser, numpy, numba, scipy.linalg (numba's BLAS check) and scipy.optimize
+#: (L-BFGS-B), the package's core modules, the CSV, the first cached kernel, the fit and
+#: the JSON output
+PHASES = r'''
+import json, os, sys, time
+for v in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
+    os.environ.setdefault(v, "1")
+marks, t0 = {}, time.perf_counter()
+
+
+def mark(name):
+    global t0
+    t = time.perf_counter()
+    marks[name] = t - t0
+    t0 = t
+
+
+import gyrostand.cli
+args = gyrostand.cli.build_parser("identify").parse_args(["identify", sys.argv[1], "--json"])
+mark("gyrostand.cli (identify's parser)")
+import numpy as np
+mark("numpy")
+import numba
+mark("numba")
+import scipy.linalg
+mark("scipy.linalg (numba's BLAS check)")
+import scipy.optimize
+mark("scipy.optimize")
+from gyrostand.core import ml as _ml, model as _model, registry as _registry
+from gyrostand.render import render
+mark("gyrostand core modules")
+from gyrostand.core.data import Samples
+s = Samples.read_csv(sys.argv[1])
+mark("read the CSV")
+from gyrostand.core.kalman import first_order_response
+first_order_response(np.ones(3), 0.5, 0.25, 0.25, 0.0)
+mark("first cached kernel (numba registries)")
+fit = _registry.get("ml").fit(s, _model.Model.parse("markov,temp,bias"),
+                               _registry.get("ml").options())
+mark("ML fit (second kernel included)")
+text = render(fit, "json")
+mark("JSON output")
+print(json.dumps(marks))
+'''
+
+
 def load() -> str:
     try:
         return "load average " + ", ".join(f"{v:.2f}" for v in os.getloadavg())
@@ -181,6 +252,12 @@ def main() -> int:
         # compiled in every run (the issue's 3.3-s measurement of an independent script)
         fresh = folder / "anchor_ml_nocache.py"
         fresh.write_text(ANCHOR.replace("@njit(cache=True)", "@njit"))
+        floor = folder / "floor.py"
+        floor.write_text(FLOOR)
+        floor_opt = folder / "floor_optimize.py"
+        floor_opt.write_text("import scipy.optimize\n" + FLOOR)
+        phases = folder / "phases.py"
+        phases.write_text(PHASES)
         print(f"data: simulate(markov,temp,white,bias, chamber_profile({HOURS:g} h), dt=1 s, "
               f"seed={SEED}): {len(s)} samples -> {csv.name}")
         print(f"whole processes, wall clock from spawn to exit: median of {args.repeats} "
@@ -193,6 +270,10 @@ def main() -> int:
             gyro + ["diagnose", str(csv), "--model", "markov,temp,bias"], args.repeats, folder)
         a_med, a_t, a_out = whole_process([py, str(anchor), str(csv)], args.repeats, folder)
         f_med, f_t, _ = whole_process([py, str(fresh), str(csv)], args.repeats, folder)
+        n_med, n_t, _ = whole_process([py, str(floor)], args.repeats, folder)
+        o_med, o_t, _ = whole_process([py, str(floor_opt)], args.repeats, folder)
+        runs = [json.loads(whole_process([py, str(phases), str(csv)], 1, folder)[2])
+                for _ in range(args.repeats)]
         ours, theirs = json.loads(i_out), json.loads(a_out)
         ratio = i_med / a_med
         print(line("gyrostand --help", h_med, h_t, f"<= {TARGET_HELP:g} s",
@@ -203,6 +284,8 @@ def main() -> int:
                    d_med <= TARGET_DIAGNOSE))
         print(line("anchor: plain numba KF + Nelder-Mead script", a_med, a_t))
         print(line("anchor, its kernels compiled per run (no cache)", f_med, f_t))
+        print(line("floor: numpy + numba + one cached kernel", n_med, n_t))
+        print(line("floor + import scipy.optimize", o_med, o_t))
         print(f"\n    identify / anchor = {ratio:.2f}   (target <= {TARGET_VS_ANCHOR:g})  "
               f"{verdict(ratio <= TARGET_VS_ANCHOR)}")
         print(f"    identify / anchor compiled per run = {i_med / f_med:.2f}   (target <= "
@@ -212,6 +295,19 @@ def main() -> int:
               f"{ours['loglik'] - theirs['loglik']:+.3g}")
         print("    estimates (gyrostand / anchor): " + ", ".join(
             f"{k} {ours['parameters'][k]['value']:.4g} / {theirs[k]:.4g}" for k in TRUTH))
+        half = TARGET_VS_ANCHOR * a_med
+        print(f"    {TARGET_VS_ANCHOR:g} x anchor = {half:.2f} s against the floor "
+              f"{n_med:.2f} s (numpy + numba + one cached kernel; {o_med:.2f} s with "
+              f"scipy.optimize): {'below' if half < n_med else 'above'} the floor; "
+              f"identify spends {i_med - n_med:.2f} s above it, the anchor "
+              f"{a_med - n_med:.2f} s")
+        print(f"\n    where identify's time goes, in one process (median of {len(runs)}):")
+        total = 0.0
+        for k in runs[0]:
+            v = statistics.median(r[k] for r in runs)
+            total += v
+            print(f"      {v:6.3f} s  {k}")
+        print(f"      {total:6.3f} s  in all, after the interpreter's start")
     print(f"\n{load()} at the end")
     return 0
 

@@ -23,7 +23,7 @@ import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 # the run folder's samples table and durable writes (kept importable from here)
 from gyrostand.runfolder import SAMPLES_COLUMNS, SamplesWriter, datasync, read_samples_csv
@@ -174,6 +174,58 @@ class Binner:
                     continue
             add(g, c, t, v, out)
             t0 = self.t0
+        return out
+
+    def add_arrays(self, g: Any, c: Any, t: Any, v: Any) -> list[Bin]:
+        """:meth:`add_many` of the samples ``zip(g, c, t, v)`` given as numpy arrays (in
+        arrival order): the same bins, counts and sums, bit for bit.
+
+        Per gyro, a sample whose bin index differs from its previous sample's (or its
+        gyro's first here) is an *event* and goes through :meth:`add`, in arrival order
+        (only events close or open bins). The samples after an event up to the gyro's
+        next one share its index: when the event left its gyro's open bin at that index,
+        they fall in it and are summed into it in order (``cumsum`` adds one after the
+        other, as ``+=`` does); else (a late or refused event) each goes through
+        :meth:`add` too."""
+        import numpy as np
+
+        out: list[Bin] = []
+        n = len(t)
+        if n and self.t0 is None:  # the first sample sets the grid
+            self.add(int(g[0]), int(c[0]), float(t[0]), float(v[0]), out)
+            g, c, t, v = g[1:], c[1:], t[1:], v[1:]
+            n -= 1
+        if not n:
+            return out
+        k = np.floor((t - self.t0) / self.dt)
+        events: list[tuple[int, int, Any]] = []  # (position, gyro, the run after it)
+        for gi in np.unique(g).tolist():
+            idx = np.flatnonzero(g == gi)
+            kg = k[idx]
+            starts = np.flatnonzero(np.concatenate(([True], kg[1:] != kg[:-1]))).tolist()
+            ends = starts[1:] + [len(idx)]
+            events += [(int(idx[a]), gi, idx[a + 1:b]) for a, b in zip(starts, ends,
+                                                                       strict=True)]
+        events.sort(key=lambda e: e[0])
+        add, opened = self.add, self._open
+        for i, gi, run in events:
+            add(gi, int(c[i]), float(t[i]), float(v[i]), out)
+            if not len(run):
+                continue
+            b = opened[gi]
+            if b is not None and b.k == int(k[i]):
+                cr, vr = c[run], v[run]
+                zero = cr == 0
+                v0, v1 = vr[zero], vr[~zero]
+                if len(v0):
+                    b.s0 = float(np.concatenate(([b.s0], v0)).cumsum()[-1])
+                    b.n0 += len(v0)
+                if len(v1):
+                    b.s1 = float(np.concatenate(([b.s1], v1)).cumsum()[-1])
+                    b.n1 += len(v1)
+            else:
+                for j in run.tolist():
+                    add(gi, int(c[j]), float(t[j]), float(v[j]), out)
         return out
 
     def flush(self, until_t: float | None = None) -> list[Bin]:

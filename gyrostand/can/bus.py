@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import can
@@ -29,6 +29,7 @@ from gyrostand.can.codes import (
     role_codes,
 )
 from gyrostand.can.dbc import MessageRef, find_message
+from gyrostand.can.pack import packer
 from gyrostand.core.terms import VOCABULARY, summary_bits
 from gyrostand.errors import CanEdgeError
 
@@ -94,6 +95,93 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
 
 
 
+class _Layout:
+    """What :meth:`FrameEncoder.signal_values` reads of one cantools message, read once:
+    per signal (in the message's order) its value when not given (the DBC initial value or
+    0), its range as floats, whether it is a float, its scale and offset, and its
+    multiplexer signal and ids; the same numbers the encoder read from the signals at
+    every frame before."""
+
+    __slots__ = ("msg", "names", "specs", "values", "_pack")
+
+    def __init__(self, msg: Message) -> None:
+        self.msg = msg
+        self.names = frozenset(s.name for s in msg.signals)
+        self.specs: dict[str, tuple[Any, float | None, float | None, bool, Any, Any,
+                                    str | None, Any]] = {}
+        for s in msg.signals:  # a repeated name: the first signal, as before
+            self.specs.setdefault(s.name, (
+                s.initial if s.initial is not None else 0,
+                None if s.minimum is None else float(s.minimum),
+                None if s.maximum is None else float(s.maximum),
+                bool(s.is_float), s.scale, s.offset, s.multiplexer_signal,
+                s.multiplexer_ids))
+        self.values: Callable[[Mapping[str, float]], dict[str, float]] = \
+            _compile_values(msg.name, self.specs)
+        self._pack: Any = False  # not built yet
+
+    def packer(self) -> Any:
+        """The message's payload packer (:func:`gyrostand.can.pack.packer`: cantools' bit
+        layout, checked against cantools when built), or None: cantools packs."""
+        if self._pack is False:
+            self._pack = packer(self.msg)
+        return self._pack
+
+
+def _compile_values(message: str, specs: dict[str, tuple]) -> Callable:
+    """``values(signals) -> {signal: value}`` of :meth:`FrameEncoder.signal_values`,
+    compiled once per message: per signal in the message's order, whether it is active
+    (its multiplexer active and holding one of its ids), then its value (given, else its
+    default; as a float; clamped into its range unless NaN; an integer signal rounded to
+    its scale's grid, NaN refused), each value computed once, when first needed, as the
+    per-frame closures did (the same operations on the same numbers, in the same order:
+    the same values, and the same first error)."""
+    env: dict[str, Any] = {"_U": object(), "_Err": CanEdgeError}
+    idx = {name: i for i, name in enumerate(specs)}
+    lines = ["def values(signals):", "    get = signals.get"]
+    lines += [f"    v{i} = _U" for i in range(len(specs))]
+
+    def ensure(name: str, ind: str) -> list[str]:
+        i = idx[name]
+        default, lo, hi, is_float, scale, offset, _, _ = specs[name]
+        env.update({f"_d{i}": default, f"_lo{i}": lo, f"_hi{i}": hi, f"_s{i}": scale,
+                    f"_o{i}": offset})
+        body = [f"x = get({name!r})", f"if x is None: x = _d{i}", "x = float(x)"]
+        clamp = ([f"    x = max(x, _lo{i})"] if lo is not None else []) + \
+            ([f"    x = min(x, _hi{i})"] if hi is not None else [])
+        if clamp:
+            body += ["if x == x:"] + clamp
+        if not is_float:
+            err = f"{message}.{name}: NaN in an integer signal"
+            body += [f"if x != x: raise _Err({err!r})",
+                     f"x = int(round((x - _o{i}) / _s{i})) * _s{i} + _o{i}"]
+        body.append(f"v{i} = x")
+        return [f"{ind}if v{i} is _U:"] + [f"{ind}    {b}" for b in body]
+
+    def active(name: str, out: str, ind: str) -> list[str]:
+        """Lines setting ``out`` to whether ``name`` is active."""
+        _, _, _, _, _, _, mux, ids = specs[name]
+        if not ids:
+            return [f"{ind}{out} = True"]
+        i = idx[name]
+        env[f"_ids{i}"] = ids
+        return active(mux, out, ind) + [f"{ind}if {out}:"] + ensure(mux, ind + "    ") + \
+            [f"{ind}    {out} = int(v{idx[mux]}) in _ids{i}"]
+
+    for name in specs:
+        i = idx[name]
+        if specs[name][7]:
+            lines += active(name, "a", "    ") + ["    if a:"] + ensure(name, "        ") + \
+                [f"        out[{name!r}] = v{i}"]
+        else:
+            lines += ensure(name, "    ") + [f"    out[{name!r}] = v{i}"]
+    lines.insert(2, "    out = {}")
+    lines.append("    return out")
+    exec(compile("\n".join(lines) + "\n", f"<gyrostand signal values {message}>", "exec"), env)
+    fn: Callable = env["values"]
+    return fn
+
+
 def _wrap(value: int, sig) -> int:
     """Cumulative counts wrap modulo the signal's range (documented in dbc/README.md)."""
     top = int(sig.maximum) if sig.maximum is not None else (1 << sig.length) - 1
@@ -112,11 +200,32 @@ class FrameEncoder:
         self.db = db
         self.bus = bus
         self._codes: dict[tuple[str, str], dict[str, ValueCodes]] = {}
+        self._messages: dict[Any, Message] = {}
+        self._layouts: dict[str, _Layout] = {}
 
     def _message(self, ref: str | int | MessageRef) -> Message:
+        """The cantools message of ``ref``, looked up once per reference (a lookup that
+        fails is not kept: it raises again)."""
         if isinstance(ref, MessageRef):
-            return self.db.get_message_by_name(ref.name)
-        return find_message(self.db, ref)[1]
+            key: Any = ref
+        elif type(ref) in (str, int):
+            key = (type(ref), ref)  # 1 and "1" stay apart
+        else:  # not a reference: find_message says what is wrong with it
+            return find_message(self.db, ref)[1]
+        msg = self._messages.get(key)
+        if msg is None:
+            if isinstance(ref, MessageRef):
+                msg = self.db.get_message_by_name(ref.name)
+            else:
+                msg = find_message(self.db, ref)[1]
+            self._messages[key] = msg
+        return msg
+
+    def _layout(self, msg: Message) -> _Layout:
+        layout = self._layouts.get(msg.name)
+        if layout is None or layout.msg is not msg:
+            layout = self._layouts[msg.name] = _Layout(msg)
+        return layout
 
     def codes(self, ref: str | int | MessageRef, role: str) -> dict[str, ValueCodes]:
         """The checked value tables of message ``ref`` in ``role`` (``result``,
@@ -145,10 +254,18 @@ class FrameEncoder:
                timestamp: float = 0.0) -> can.Message:
         """One frame of message ``ref`` carrying ``signals`` (physical values)."""
         msg, data = self.signal_values(ref, signals)
-        try:
-            payload = msg.encode(data, strict=False)
-        except Exception as exc:
-            raise CanEdgeError(f"cannot encode {msg.name} from {data}: {exc}") from exc
+        pack = self._layout(msg).packer()
+        payload = None
+        if pack is not None:  # cantools' bytes (checked), or None: cantools decides
+            try:
+                payload = pack(data)
+            except Exception:  # noqa: BLE001 - cantools raises its own error below
+                payload = None
+        if payload is None:
+            try:
+                payload = msg.encode(data, strict=False)
+            except Exception as exc:
+                raise CanEdgeError(f"cannot encode {msg.name} from {data}: {exc}") from exc
         return can.Message(arbitration_id=msg.frame_id, is_extended_id=msg.is_extended_frame,
                            data=payload, timestamp=timestamp, is_fd=bool(msg.is_fd),
                            is_rx=False)
@@ -159,38 +276,11 @@ class FrameEncoder:
         :meth:`encode` would encode (defaults filled, inactive multiplexed signals left out).
         """
         msg = self._message(ref)
-        by_name = {s.name: s for s in msg.signals}
-        unknown = set(signals) - set(by_name)
-        if unknown:
+        layout = self._layout(msg)
+        if not layout.names.issuperset(signals):
+            unknown = set(signals) - layout.names
             raise CanEdgeError(f"message {msg.name} has no signal(s) {sorted(unknown)}")
-        values: dict[str, float] = {}
-
-        def value(sig) -> float:
-            if sig.name in values:
-                return values[sig.name]
-            v = signals.get(sig.name)
-            if v is None:
-                v = sig.initial if sig.initial is not None else 0
-            v = float(v)
-            if not math.isnan(v):
-                if sig.minimum is not None:
-                    v = max(v, float(sig.minimum))
-                if sig.maximum is not None:
-                    v = min(v, float(sig.maximum))
-            if not sig.is_float:
-                if math.isnan(v):
-                    raise CanEdgeError(f"{msg.name}.{sig.name}: NaN in an integer signal")
-                v = int(round((v - sig.offset) / sig.scale)) * sig.scale + sig.offset
-            values[sig.name] = v
-            return v
-
-        def active(sig) -> bool:
-            if not sig.multiplexer_ids:
-                return True
-            mux = by_name[sig.multiplexer_signal]
-            return active(mux) and int(value(mux)) in sig.multiplexer_ids
-
-        return msg, {s.name: value(s) for s in msg.signals if active(s)}
+        return msg, layout.values(signals)
 
     def send(self, frames: can.Message | Sequence[can.Message],
              timeout: float | None = 1.0) -> None:

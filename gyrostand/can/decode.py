@@ -20,7 +20,6 @@ import math
 import threading
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, replace
 from typing import TYPE_CHECKING
 
 import can
@@ -33,7 +32,7 @@ from gyrostand.can.logread import ERROR_FRAME, Frame, frame_fields
 if TYPE_CHECKING:
     from gyrostand.can.blfarray import FrameArrays
 from gyrostand.can.routes import ChannelMap, _decoder, _Route
-from gyrostand.can.rxstats import REASONS, Counts, DecodeStats, Rejections
+from gyrostand.can.rxstats import COUNT_FIELDS, REASONS, Counts, DecodeStats, Rejections
 
 __all__ = ["DecodingListener", "DecodeStats", "ChannelMap", "REASONS", "DRIFT", "TEMP",
            "Sample", "Command", "MALFORMED", "UNRANGED_LIMIT", "Counts", "Rejections"]
@@ -90,6 +89,9 @@ class DecodingListener(can.Listener):
         self._steps = 0
         self._outliers_logged = 0
         self._buf: list[Sample] = []
+        # the array path's samples, after _buf's: (gyro, channel, t, value) arrays each
+        self._chunks: list[tuple] = []
+        self._nchunked = 0
         self._commands: deque[Command] = deque()
         self._command_capacity = command_capacity
         self._lock = threading.Lock()
@@ -396,7 +398,7 @@ class DecodingListener(can.Listener):
             mono = np.empty(len(rs), bool)
             mono[order] = ts >= prev_t
             ok &= mono
-            ok &= len(self._buf) + np.cumsum(nsamp[ia]) <= self.capacity
+            ok &= len(self._buf) + self._nchunked + np.cumsum(nsamp[ia]) <= self.capacity
             if self._held:
                 ok[:] = False
             fail = np.flatnonzero(~ok)
@@ -444,7 +446,9 @@ class DecodingListener(can.Listener):
                     cv = cnt[mine][use]
                     if len(cv):
                         prev = self._last_counter.get(ckey)
-                        steps = np.diff(cv) if prev is None else np.diff(cv, prepend=prev)
+                        # np.diff(cv[, prepend=prev]), without its generic set-up
+                        steps = cv[1:] - cv[:-1] if prev is None else \
+                            cv - np.concatenate(([prev], cv[:-1]))
                         n.counter_jumps += int(np.count_nonzero(steps % mod != 1 % mod))
                         self._last_counter[ckey] = int(cv[-1])
                 if single:
@@ -459,18 +463,17 @@ class DecodingListener(can.Listener):
             ra = c[ia]
             gt = np.array([r.extract[0][0] for r in routes], np.int64)
             ct = np.array([r.extract[0][1] for r in routes], np.int64)
-            samples = zip(gt[ra].tolist(), ct[ra].tolist(), (t[ia] + offset).tolist(),
-                          value1[ia].tolist(), strict=True)
+            chunk = (gt[ra], ct[ra], t[ia] + offset, value1[ia])
             count = len(ia)
         else:
             pos, ent = np.concatenate(pos_l), np.concatenate(ent_l)
             order = np.lexsort((ent, pos))  # frame order, then the route's extract order
             pos = pos[order]
-            samples = zip(np.concatenate(g_l)[order].tolist(),
-                          np.concatenate(c_l)[order].tolist(), (t[pos] + offset).tolist(),
-                          np.concatenate(v_l)[order].tolist(), strict=True)
+            chunk = (np.concatenate(g_l)[order], np.concatenate(c_l)[order], t[pos] + offset,
+                     np.concatenate(v_l)[order])
             count = len(pos)
-        self._buf.extend(samples)
+        self._chunks.append(chunk)  # as arrays: the binner takes them so (Ingest.pump)
+        self._nchunked += count
         n.decoded += len(ia)
         n.samples += count
         return stop
@@ -483,6 +486,7 @@ class DecodingListener(can.Listener):
         the common case its timestamp lies within ``window`` s of the anchor (the newest
         accepted frame) and at or after its id's previous frame, and it is accepted at
         once; anything else goes through :meth:`_timed`, which holds or rejects it."""
+        self._unchunk()
         n, rej, routes, buf = self._n, self._rej, self._routes, self._buf
         cap, last_counter = self.capacity, self._last_counter
         window, offset, a, held = self.window, self._offset, self._anchor, bool(self._held)
@@ -647,6 +651,7 @@ class DecodingListener(can.Listener):
 
     def _accept(self, frame: _Held) -> None:
         t, route, out, counted = frame
+        self._unchunk()
         rej, n, buf = self._rej, self._n, self._buf
         if t < route.last_t:
             rej.non_monotonic += 1
@@ -741,9 +746,28 @@ class DecodingListener(can.Listener):
         log.warning("CAN bus error: %s", exc)
 
     # -- consumer side -----------------------------------------------------------------
+    def _unchunk(self) -> None:
+        """The array path's samples into the FIFO as tuples (before a frame-by-frame
+        sample follows them, or for a consumer of tuples); the caller holds the lock."""
+        if self._chunks:
+            for g, c, t, v in self._chunks:
+                self._buf.extend(zip(g.tolist(), c.tolist(), t.tolist(), v.tolist(),
+                                     strict=True))
+            self._chunks, self._nchunked = [], 0
+
+    def drain_chunks(self) -> tuple[list[Sample], list[tuple]]:
+        """Pop every sample, in arrival order: the tuples, then the array path's
+        ``(gyro, channel, t, value)`` arrays (:meth:`Binner.add_arrays
+        <gyrostand.can.binning.Binner.add_arrays>` takes them as they are)."""
+        with self._lock:
+            buf, chunks = self._buf, self._chunks
+            self._buf, self._chunks, self._nchunked = [], [], 0
+            return buf, chunks
+
     def drain(self, max_items: int | None = None) -> list[Sample]:
         """Pop up to ``max_items`` (all if None) samples in arrival order."""
         with self._lock:
+            self._unchunk()
             buf = self._buf
             if max_items is None or max_items >= len(buf):
                 self._buf = []
@@ -761,7 +785,7 @@ class DecodingListener(can.Listener):
 
     def pending(self) -> int:
         """Samples waiting in the FIFO."""
-        return len(self._buf)
+        return len(self._buf) + self._nchunked
 
     def pop_commands(self) -> list[Command]:
         """Decoded command frames ``(timestamp, {signal: value})`` received so far."""
@@ -772,11 +796,12 @@ class DecodingListener(can.Listener):
 
     def stats(self) -> DecodeStats:
         """A consistent snapshot of every counter (thread-safe)."""
-        with self._lock:
-            n = replace(self._n)
-            rej = asdict(self._rej)
+        with self._lock:  # flat int fields: what dataclasses.asdict gave, without its
+            n, r = self._n, self._rej  # deep copy (a heartbeat asks at every beat)
+            counts = {k: getattr(n, k) for k in COUNT_FIELDS}
+            rej = {k: getattr(r, k) for k in REASONS}
             steps, held = self._steps, len(self._held)
-        return DecodeStats(**asdict(n), rejected=rej, clock_steps=steps, held=held)
+        return DecodeStats(**counts, rejected=rej, clock_steps=steps, held=held)
 
     @property
     def last_timestamp(self) -> float:

@@ -238,13 +238,15 @@ def array_extractor(message, names: Sequence[str], ints: Sequence[str] = ()
             return None
         fns[name] = fn
     down = np.uint64(8 * (8 - nbytes))
+    # the big-endian integer only when a Motorola signal reads it
+    big = any(by_name[name].byte_order != "little_endian" for name in fns)
 
     def decode(data):
         d = np.ascontiguousarray(data[:, :8])
         if d.shape[1] < 8:
             d = np.pad(d, ((0, 0), (0, 8 - d.shape[1])))
         nl = d.view("<u8").ravel()
-        nb = nl.byteswap() >> down
+        nb = nl.byteswap() >> down if big else nl
         return {name: fn(nl, nb) for name, fn in fns.items()}
 
     if not agrees_with_cantools_arrays(message, decode, list(fns), set(ints)):

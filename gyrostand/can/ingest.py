@@ -21,6 +21,12 @@ class Ingest:
 
     def pump(self, max_items: int | None = None) -> list[Bin]:
         """Move decoded samples into the binner; return the bins that closed."""
+        if max_items is None:  # the array path's samples stay arrays (the same bins)
+            samples, chunks = self.listener.drain_chunks()
+            bins = self.binner.add_many(samples) if samples else []
+            for g, c, t, v in chunks:
+                bins += self.binner.add_arrays(g, c, t, v)
+            return bins
         return self.binner.add_many(self.listener.drain(max_items))
 
     def finish(self, until_t: float | None = None) -> list[Bin]:

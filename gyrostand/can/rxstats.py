@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-__all__ = ["Counts", "Rejections", "DecodeStats", "REASONS"]
+__all__ = ["Counts", "Rejections", "DecodeStats", "REASONS", "COUNT_FIELDS"]
 
 
 @dataclass(slots=True)
@@ -49,6 +49,10 @@ class Counts:
     counter_jumps: int = 0
     bus_errors: int = 0
     listener_errors: int = 0
+
+
+#: The fields of :class:`Counts`, in order (the first keys of ``stats.decoder``).
+COUNT_FIELDS = tuple(f.name for f in fields(Counts))
 
 
 @dataclass(frozen=True)

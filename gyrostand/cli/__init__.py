@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import importlib
 import logging
 import os
 import signal
@@ -13,41 +14,49 @@ from typing import Any
 
 from .. import __version__
 from ..errors import GyrostandError
-from . import (
-    allan,
-    batch,
-    demo,
-    design,
-    diagnose,
-    export,
-    fit,
-    identify,
-    init,
-    replay,
-    report,
-    run,
-    simulate,
-)
 
-SUBCOMMANDS = (init, run, replay, simulate, demo, identify, diagnose, fit, report, allan,
-               export, design, batch)
+#: the subcommands, in ``--help`` order: each is the module of its name here, whose
+#: ``add_parser`` adds it (imported when a parser with it is built)
+COMMANDS = ("init", "run", "replay", "simulate", "demo", "identify", "diagnose", "fit",
+            "report", "allan", "export", "design", "batch")
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: every subcommand, or ``only`` that one (what a command
+    line naming it parses to is the same; its module alone is imported and built)."""
     parser = argparse.ArgumentParser(
         prog="gyrostand",
         description="CAN-bus field service for gyro thermal test stands.",
     )
     parser.add_argument("--version", action="version", version=f"gyrostand {__version__}")
     _add_global_args(parser, argparse.SUPPRESS)
-    sub = parser.add_subparsers(dest="command", required=True)
-    for mod in SUBCOMMANDS:
-        mod.add_parser(sub)
+    # with one subcommand built, the usage line still names them all (as an error of the
+    # main parser, e.g. an unrecognized argument, prints it)
+    sub = parser.add_subparsers(dest="command", required=True, metavar=None if only is None
+                                else "{" + ",".join(COMMANDS) + "}")
+    for name in COMMANDS if only is None else (only,):
+        importlib.import_module(f".{name}", __name__).add_parser(sub)
     for subparser in sub.choices.values():  # `gyrostand run CFG -v` works as `-v run CFG`
         _add_global_args(subparser, argparse.SUPPRESS)
     return parser
+
+
+def _command_in(argv: Sequence[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word not an option, when it is one and
+    only the global flags come before it), else None (the whole parser: ``--help``,
+    ``--version``, no or an unknown command)."""
+    for arg in argv:
+        if not arg.startswith("-"):
+            return arg if arg in COMMANDS else None
+        if arg not in _GLOBAL_FLAGS and not (arg.startswith("-v") and set(arg[1:]) == {"v"}):
+            return None
+    return None
+
+
+#: the main parser's options that may come before a subcommand and take no value
+_GLOBAL_FLAGS = ("--debug", "-v", "--verbose", "-q", "--quiet")
 
 
 def _add_global_args(parser: argparse.ArgumentParser, default: Any) -> None:
@@ -103,7 +112,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
     if "numpy" not in sys.modules:
         for var in _ONE_THREAD:
             os.environ.setdefault(var, "1")
-    parser = build_parser()
+    parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     _gather_globals(args)
     if hasattr(signal, "SIGUSR1"):  # `kill -USR1 PID`: every thread's stack to stderr

@@ -244,16 +244,25 @@ def _num(x: float) -> str:
     return "nan" if math.isnan(x) else f"{x:.9g}"
 
 
+#: the row format of (identifiers, parameters): ``%.9g`` formats a number as ``_num`` does
+#: (``nan`` for any NaN, ``inf``, ``-0``: one formatting routine), in one operation a row
+_ROW_FORMATS: dict[tuple[int, int], str] = {}
+
+
 def estimates_row(t: float, estimates: Sequence[Estimate], param_names: Sequence[str]
                   ) -> str:
     """The row of bin ``t``: per identifier each parameter's value and std, its status."""
-    cells = [repr(t)]
+    shape = (len(estimates), len(param_names))
+    fmt = _ROW_FORMATS.get(shape)
+    if fmt is None:
+        fmt = _ROW_FORMATS[shape] = "%r" + (",%.9g,%.9g" * shape[1] + ",%s") * shape[0]
+    args: list[Any] = [t]
     for e in estimates:
+        values = e.values
         for p in param_names:
-            v, s = e.values[p]
-            cells += [_num(v), _num(s)]
-        cells.append(e.status)
-    return ",".join(cells)
+            args += values[p]
+        args.append(e.status)
+    return fmt % tuple(args)
 
 
 class EstimatesWriter:
