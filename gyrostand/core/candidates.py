@@ -25,7 +25,7 @@ referred to χ²(2) where its tail is that of χ²(1) stretched by a lag range o
 Markov β) held at the current fit (:func:`held_params`): refitting β with it, its LR at a
 fixed lag was over-dispersed on clean records (mean 1.6–1.7 at τ = 300 s against χ²(1)'s
 1), so its test fired at twice its level (p < 0.05 in 10 and 11 of 100 clean 6-h and 2-h
-runs). Measured (benchmarks/results/false_alarm.txt): held, 5/100 and 4/100; warm-up's
+runs). Measured (benchmarks/results/false_alarm.txt): held, 4/100 on 2-h runs; warm-up's
 and hysteresis's tails near nominal. A joint diagnosis of several runs (a tuple of
 :class:`Samples`) takes the same test, its geometry on the joint model, for a shape the
 runs share; a per-run shape (a warm-up's τ, one process per run) keeps χ² with the shapes
