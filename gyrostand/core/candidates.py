@@ -361,7 +361,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     used_runs = [prepare(s, "candidates") for s in runs]
     bigger = model.add(term)
     shapes = shape_params(bigger, term)
-    held = held_params(model, base) if rate_driven(samples, model, term) else {}
+    held: dict[str, float] = {}
     if joint:
         prob: Any = _JointProblem(bigger, used_runs, {})
         per_run = prob.per_run
@@ -618,9 +618,7 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
         try:
             # a candidate with a shape is refitted with the current model's time constants
             # held (:func:`held_params`)
-            r = refit(samples, model.add(term), base,
-                      held_params(model, base) if shaped and rate_driven(samples, model, term)
-                      else None)
+            r = refit(samples, model.add(term), base)
         except GyrostandError as exc:
             return None, exc, time.perf_counter() - t0, ()
         seconds = time.perf_counter() - t0
