@@ -465,6 +465,8 @@ def joint_diagnosis(d: JointDiagnosis) -> str:
     for c in d.candidates:
         lines.append(f"  {c.term:<12} {c.lr_stat:9.2f} {c.df:3d} {c.p_value:9.2g} "
                      f"{c.delta_bic:9.1f}  {c.note}")
+    if d.candidates:
+        lines.append(f"  p from: {tests_used(d.candidates)}")
     return "\n".join(lines)
 
 

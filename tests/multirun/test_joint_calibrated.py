@@ -1,0 +1,58 @@
+"""Joint (several-run) diagnoses test a candidate with a shape as single runs do: its LR
+against the supremum of a χ²(df) process over the shape (gyrostand.core.candidates), the
+process's geometry taken on the joint model (the runs' whitened regressors stacked, the
+joint fit's metric)."""
+
+from __future__ import annotations
+
+import pytest
+
+from gyrostand.core.candidates import TEST_SUP, rank_candidates
+from gyrostand.core.chisq import sup_chi2_sf
+from gyrostand.core.ml import ml
+from gyrostand.core.multirun import JointDiagnosis, joint_ml
+from gyrostand.render.text import RENDERER
+
+from .sets import run_set
+
+SHAPED = ["temp_rate", "warmup", "hysteresis"]
+
+
+def test_a_joint_diagnosis_of_one_run_tests_shapes_as_the_single_run():
+    """N = 1: the same test, df, curvatures and p as the single-run diagnosis."""
+    m, runs, _ = run_set(3, n_runs=1)
+    single = {c.term: c for c in rank_candidates(runs[0], m, ml(runs[0], m), SHAPED)}
+    joint = {c.term: c for c in rank_candidates(tuple(runs), m, joint_ml(runs, m), SHAPED)}
+    for term in SHAPED:
+        s, j = single[term], joint[term]
+        print(f"{term}: single LR {s.lr_stat:.4f} p {s.p_value:.4g} lkc {s.shape_lkc}; "
+              f"joint LR {j.lr_stat:.4f} p {j.p_value:.4g} lkc {j.shape_lkc}")
+        assert s.test == j.test == TEST_SUP, term
+        assert s.df == j.df == 1 and len(j.shape_lkc) == len(s.shape_lkc), term
+        assert j.shape_lkc == pytest.approx(s.shape_lkc, rel=1e-6), term
+        assert j.lr_stat == pytest.approx(s.lr_stat, rel=1e-6, abs=1e-6), term
+        assert j.p_value == pytest.approx(s.p_value, rel=1e-6), term
+
+
+def test_a_joint_diagnosis_of_two_runs_tests_a_shared_shape_over_its_range():
+    """Two runs: the gyro's lag and width (shared by the runs) are tested as the supremum
+    over the shape, df = the coefficient, p from the LR and the curvatures shown; a per-run
+    shape (each switch-on's warm-up τ: one process per run) keeps χ² with the shapes
+    counted."""
+    m, runs, _ = run_set(5, n_runs=2)
+    fit = joint_ml(runs, m)
+    by = {c.term: c for c in rank_candidates(tuple(runs), m, fit, SHAPED)}
+    for term, dims in (("temp_rate", 1), ("hysteresis", 2)):
+        c = by[term]
+        assert c.test == TEST_SUP and c.df == 1 and len(c.shape_lkc) == dims, term
+        assert all(v > 0 for v in c.shape_lkc), term
+        assert c.p_value == pytest.approx(sup_chi2_sf(c.lr_stat, c.df, c.shape_lkc)), term
+        assert c.to_dict()["df"] == c.df and c.to_dict()["shape_lkc"] == list(c.shape_lkc)
+    w = by["warmup"]
+    assert w.test != TEST_SUP and w.shape_lkc == () and w.df == 4  # 2 amplitudes, 2 τ
+    d = JointDiagnosis(fit=fit, candidates=tuple(by.values()), alpha=0.05, adequate=True,
+                       reasons=())
+    table = RENDERER.render(d)
+    assert "p from: " in table and "sup over the shape" in table
+    sup_line = table.split("df = coefficients): ")[1].split(";")[0]
+    assert "temp_rate" in sup_line and "hysteresis" in sup_line and "warmup" not in sup_line
