@@ -16,7 +16,7 @@ markov2 to a record simulated from the lag model on the standard cycle). Printed
 
 trend / warmup (``--pair trend warmup``): the single 6-h program's Λ and the free-bias
 switch-on splits (which do not separate them), then the power-cycle protocol of
-:func:`gyrostand.core.separation.separate_power_cycle` (k switch-ons within the powered-on
+:func:`gyrostand.core.switch_ons.separate_power_cycle` (k switch-ons within the powered-on
 budget, off periods up to ``--off`` h, the turn-on bias a random effect of spread
 ``--spread``): its Λ and gain over the standard cycle, the gain at σ_b = 0.03, 0.1, 0.3,
 and the verify of ``N`` sets from each model fitted by the protocol's joint ML.
@@ -121,7 +121,7 @@ def trend_vs_warmup(n: int, evaluations: int, hours: float, spread: float, off: 
     import os
     import subprocess
 
-    from gyrostand.core.separation import separate_power_cycle, separate_switch_ons, verify_protocol
+    from gyrostand.core.switch_ons import separate_power_cycle, separate_switch_ons, verify_protocol
 
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,

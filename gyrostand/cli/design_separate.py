@@ -25,11 +25,10 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
         rival_models,
         rivals,
         separate,
-        separate_switch_ons,
-        switch_on_records,
         time_only,
         verify,
     )
+    from ..core.switch_ons import separate_switch_ons, switch_on_records
     from ..errors import ModelError
 
     a, b = args.separate
@@ -70,7 +69,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
                             unit="splits") as bar:
             res.switch_ons = separate_switch_ons(riv, limits, progress=bar.update)
         if spread is not None:
-            from ..core.separation import SPREADS, separate_power_cycle
+            from ..core.switch_ons import SPREADS, separate_power_cycle
 
             with progress.stage("design", f"power cycles: {a} vs {b}, sigma_b {spread:g}",
                                 total=None, unit="protocols") as bar:
@@ -100,7 +99,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
             res.verify = verify(riv, records, args.verify, seed=args.seed,
                                 progress=bar.update)
         if pcr is not None:
-            from ..core.separation import verify_protocol
+            from ..core.switch_ons import verify_protocol
 
             with progress.stage("design", "verify the power cycle", total=2 * args.verify,
                                 unit="sets") as bar:
@@ -275,7 +274,7 @@ def write_power_cycle(out: Path, pcr, limits) -> None:
     at the next run's start temperature) and simulate_power_cycle.yaml (one ``simulate:``
     document per switch-on, its program)."""
     from ..core.design import standard_cycle
-    from ..core.separation import run_limits_of
+    from ..core.switch_ons import run_limits_of
 
     pc = pcr.best
     docs = []

@@ -17,12 +17,11 @@ import pytest
 from gyrostand.core.data import Samples
 from gyrostand.core.design import ChamberLimits, case_temperature, standard_cycle
 from gyrostand.core.model import Model, context
-from gyrostand.core.separation import (
+from gyrostand.core.separation import expected_lr, rivals
+from gyrostand.core.switch_ons import (
     _protocol_distance,
-    expected_lr,
     expected_lr_protocol,
     power_cycle,
-    rivals,
     verify_protocol,
 )
 
@@ -123,7 +122,7 @@ def test_the_command_designs_and_verifies_a_power_cycle(tmp_path):
 def test_the_splits_tried_keep_the_powered_on_budget():
     """Equal splits of at least an hour and a long first run with one or two 1-h runs
     after it, every split summing to the budget."""
-    from gyrostand.core.separation import protocol_splits
+    from gyrostand.core.switch_ons import protocol_splits
 
     lim = ChamberLimits(0, 50, 1 / 60, 600, 6 * 3600, legs=6)
     splits = protocol_splits(lim)

@@ -300,13 +300,8 @@ def test_trend_and_warmup_are_time_only_and_a_split_budget_is_measured():
     switch-ons gives each split's Λ (measured at 2 h: both directions fall with the split,
     the per-run bias absorbing each restart's level), and the joint verify of a split design
     on data from a short warm-up picks the warm-up every time."""
-    from gyrostand.core.separation import (
-        Rivals,
-        divergence_runs,
-        separate_switch_ons,
-        switch_on_records,
-        time_only,
-    )
+    from gyrostand.core.separation import Rivals, divergence_runs, time_only
+    from gyrostand.core.switch_ons import separate_switch_ons, switch_on_records
 
     lim = ChamberLimits(0, 50, 1 / 60, 600, 2 * 3600, legs=6)
     case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
