@@ -20,13 +20,14 @@ bound; the range's curvatures from the geometry of the efficient score process a
 current fit, :func:`shape_curvatures`). Counting the shapes in χ²(df) instead was off both ways: on
 clean 2-h cycles hysteresis's LR averaged 3.5 against χ²(3)'s 3, while temp_rate's LR was
 referred to χ²(2) where its tail is that of χ²(1) stretched by a lag range of length
-~1.3–1.5. A linear response to the temperature's changes (temp_rate's lagged rate,
-:func:`rate_driven`) is refitted with the current model's thermal response time (the
-Markov β) held at the current fit (:func:`held_params`): refitting β with it, its LR at a
-fixed lag was over-dispersed on clean records (mean 1.6–1.7 at τ = 300 s against χ²(1)'s
-1), so its test fired at twice its level (p < 0.05 in 10 and 11 of 100 clean 6-h and 2-h
-runs). Measured (benchmarks/results/false_alarm.txt): held, 4/100 on 2-h runs; warm-up's
-and hysteresis's tails near nominal. A joint diagnosis of several runs (a tuple of
+~1.3–1.5. temp_rate's test still fires at about twice its level (p < 0.05 in 10 and
+11 of 100 clean 6-h and 2-h runs; benchmarks/results/false_alarm.txt): with a lag beyond
+the drift's correlation time 1/β its lagged rate is nearly a change of the drift's thermal
+response time, so the refit moves β with it and its LR at a fixed lag is over-dispersed
+(mean 1.6–1.7 at τ = 300 s against χ²(1)'s 1, on clean 6-h cycles). Holding β at the
+current fit in that refit restored the level (5/100 and 4/100) but cost power on short
+runs (a hidden temp_rate on 1200 s lost its first rank to temp2; on a 1-h run its LR fell
+from 25.8 to 15.4), so it is not done. A joint diagnosis of several runs (a tuple of
 :class:`Samples`) takes the same test, its geometry on the joint model, for a shape the
 runs share; a per-run shape (a warm-up's τ, one process per run) keeps χ² with the shapes
 counted. Other candidates with a parameter not identified under the null
@@ -70,7 +71,6 @@ from .model import Model, context
 from .multirun import base_name
 from .prederror import ModelError, model_error
 from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
-from .term_base import Context
 from .terms import POSITIVE_KINDS, TERMS, separation, term_class
 from .validate import prepare
 
@@ -277,65 +277,6 @@ def _runs(samples: Samples | tuple[Samples, ...]) -> tuple[Samples, ...]:
     return samples if isinstance(samples, tuple) else (samples,)
 
 
-def held_params(model: Model, base: FitResult) -> dict[str, float]:
-    """The current model's time constants its mean depends on (the Markov β, through which
-    the temperature drives the drift; a lag already in the model), at the current fit:
-    held in the refit of a candidate with a shape whose effect is one of the temperature's
-    rate (:func:`rate_driven`, :func:`_refits`).
-
-    A lagged temperature rate with a lag beyond the drift's correlation time 1/β is nearly
-    a change of the drift's thermal response time, which β sets: refitting β with the
-    candidate, its LR at a fixed lag is not χ²(1) on chamber records (measured on clean
-    6-h cycles, the model simulated exactly on the bin grid: mean LR of temp_rate at
-    τ = 300 s 1.74 over 30 runs, P(LR > 3.84) 0.13; 1.60 and 0.10 over 39 runs built from
-    frames; at τ = 3 s 1.08 and 1.13), and its calibrated test fired in 10 % of clean runs
-    at 5 %. Held at the current fit, the candidate measures what its effect adds to the
-    current model's dynamics; the efficient score then projects out only the coefficients
-    (:func:`shape_grid`): p < 0.05 in 5 of 60 clean 6-h runs, none below 0.05/8."""
-    names, _ = _tangent_names(model, base.values)
-    lin = set(model.names_of_kind("linear"))
-    out = {}
-    for n in names:
-        if n in lin:
-            continue
-        keys = [k for k in base.values if base_name(k) == n]
-        out.update({k: float(base.values[k]) for k in keys})
-    return out
-
-
-def rate_driven(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:
-    """Whether ``term``'s effect is a linear response to the temperature's changes: its
-    regressor is linear in the temperature and vanishes while the temperature holds still
-    (``temp_rate``'s lagged rate) — what a change of the current model's thermal response
-    time (β, through which the temperature drives the drift) looks like. Its refit holds
-    that time (:func:`held_params`). Not so a warm-up (a function of the time since
-    switch-on: holding β for it lost the warm-up/trend look-alike of a hidden trend) or
-    hysteresis (a sign of the rate, not linear in it: holding β for it, a hidden
-    hysteresis with a lag and a width lost its rank to temp_lag; its test held its level
-    without: p < 0.05 in 7 of 100 clean 6-h runs)."""
-    bigger = model.add(term)
-    shapes = shape_params(bigger, term)
-    if not shapes:
-        return False
-    owner = bigger.term_of(shapes[0])
-    (lin,) = owner.linear
-    first = _runs(samples)[0]
-    t = np.asarray(first.t, dtype=float)
-    p = {**{n: 10.0 * first.dt for n in shapes}, lin: 0.0}
-
-    def x(temp: np.ndarray) -> np.ndarray:
-        out = np.asarray(owner.regressors(p, Context(t=t, temp=temp, dt=first.dt))[lin],
-                         dtype=float)
-        return np.where(np.isfinite(out), out, 0.0)
-
-    ramp = (t - t[0]) / 60.0  # 1 degC/min
-    one, two = x(20.0 + ramp), x(20.0 + 2.0 * ramp)
-    size = float(np.max(np.abs(one), initial=0.0))
-    # rounding leaves ~1e-14 of the ramp's size
-    return size > 0 and float(np.max(np.abs(x(np.full(t.size, 20.0))))) <= 1e-9 * size \
-        and float(np.max(np.abs(two - 2.0 * one))) <= 1e-6 * size
-
-
 def _tangent_names(model: Model, p: dict[str, float]) -> tuple[list[str], list[str]]:
     """The parameters of ``model`` whose mean tangents :func:`_mean_tangents` takes at
     ``p`` (model names): the coefficients, and the positive nonlinear parameters the mean
@@ -361,7 +302,6 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     used_runs = [prepare(s, "candidates") for s in runs]
     bigger = model.add(term)
     shapes = shape_params(bigger, term)
-    held: dict[str, float] = {}
     if joint:
         prob: Any = _JointProblem(bigger, used_runs, {})
         per_run = prob.per_run
@@ -385,12 +325,11 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):
         ctx = context(used)
         names, Tx = _mean_tangents(model, vals, ctx)
-        keep = [j for j, n in enumerate(names) if jname(n, r) not in held]
-        E, f = model.filter_columns(vals, used, Tx[:, keep])
+        E, f = model.filter_columns(vals, used, Tx)
         ok = np.isfinite(E[:, 0]) & (f > 0)
         scale = 1.0 / np.sqrt(f[ok])
         parts.append((ctx, used, {**vals, lin: 0.0}, ok, scale, E[ok, 1:] * scale[:, None],
-                      [jname(names[j], r) for j in keep]))
+                      [jname(n, r) for n in names]))
     cols = list(dict.fromkeys(n for part in parts for n in part[6]))
     T = np.zeros((sum(int(part[3].sum()) for part in parts), len(cols)))
     row = 0
@@ -399,7 +338,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         for j, n in enumerate(part[6]):
             T[row:row + m, cols.index(n)] = part[5][:, j]
         row += m
-    K, d = _efficient_metric(T, cols, base, tuple(held))
+    K, d = _efficient_metric(T, cols, base)
 
     def unit(zs: list[tuple[float, ...]]) -> np.ndarray:
         """u(θ) at the log shape values ``zs``: (observed samples, len(zs)); a regressor
@@ -456,13 +395,12 @@ def _mean_tangents(model: Model, p: Any, ctx: Any) -> tuple[list[str], np.ndarra
     return names, (np.column_stack(cols) if cols else np.zeros((ctx.t.size, 0)))
 
 
-def _efficient_metric(T: np.ndarray, names: list[str], base: Any,
-                      held: tuple[str, ...] = ()) -> tuple[np.ndarray | None, np.ndarray]:
+def _efficient_metric(T: np.ndarray, names: list[str], base: Any
+                      ) -> tuple[np.ndarray | None, np.ndarray]:
     """``(K, d)`` with ``c − K (d ⊙ K'c)`` = √M c, M = I − T V T': the metric of the
     efficient score of a candidate's coefficient. ``T``: the whitened mean tangents,
     ``V``: the current fit's covariance of those parameters (the inverse of the whole
-    information, the noise parameters' part included), given the ``held`` ones (held at
-    the current fit in the candidate's refit: the Schur complement). At the null fit a
+    information, the noise parameters' part included). At the null fit a
     candidate's score is x'ε; its variance, once the current parameters readjust with it,
     is x'Mx, not x'x: measured on clean 2-h cycles, x'Mx/x'x = 0.54–0.58 for temp_rate
     (β and γ move with it), the ratio of its LR to the score taken orthogonal to the
@@ -472,15 +410,9 @@ def _efficient_metric(T: np.ndarray, names: list[str], base: Any,
         return None, np.zeros(0)
     Q, R = np.linalg.qr(T)
     cov = base.covariance
-    held = tuple(n for n in held if cov is not None and n in base.cov_names)
     if cov is not None and all(n in base.cov_names for n in names):
         idx = [base.cov_names.index(n) for n in names]
-        V = cov[np.ix_(idx, idx)]
-        if held:
-            h = [base.cov_names.index(n) for n in held]
-            C = cov[np.ix_(idx, h)]
-            V = V - C @ np.linalg.pinv(cov[np.ix_(h, h)]) @ C.T
-        A = R @ V @ R.T
+        A = R @ cov[np.ix_(idx, idx)] @ R.T
         lam, W = np.linalg.eigh(0.5 * (A + A.T))
         lam = np.clip(lam, 0.0, 1.0)
     else:
@@ -532,21 +464,17 @@ def _triangles(x2: np.ndarray, y2: np.ndarray, z2: np.ndarray) -> np.ndarray:
     return 0.25 * np.sqrt(np.maximum(s, 0.0))
 
 
-def refit(samples: Samples, model: Model, base: FitResult | None,
-          held: dict[str, float] | None = None) -> FitResult:
-    """ML fit of ``model``, started from ``base`` where it shares parameters, ``held``
-    parameters fixed at their values; several runs (a tuple of :class:`Samples`) are
-    fitted jointly (:func:`~.multirun.joint_ml`)."""
+def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
+    """ML fit of ``model``, started from ``base`` where it shares parameters; several runs
+    (a tuple of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
     start = base.values if base is not None else None
-    fixed = dict(held or {})
     if isinstance(samples, tuple):
         from .multirun import joint_ml
 
         return joint_ml(samples, model, start=start,  # type: ignore[return-value]
-                        n_local=2 if base is not None else None, hessian_passes=1,
-                        fixed=fixed)
+                        n_local=2 if base is not None else None, hessian_passes=1)
     return ml(samples, model, start=start, n_local=2 if base is not None else None,
-              hessian_passes=1, fixed=fixed)
+              hessian_passes=1)
 
 
 def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:
@@ -616,8 +544,6 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
         t0 = time.perf_counter()
         shaped = calibrated(samples, model, term)
         try:
-            # a candidate with a shape is refitted with the current model's time constants
-            # held (:func:`held_params`)
             r = refit(samples, model.add(term), base)
         except GyrostandError as exc:
             return None, exc, time.perf_counter() - t0, ()
