@@ -212,17 +212,7 @@ class _JointProblem:
                 slogf += slogf_r
                 n += n_r
                 continue
-            c0 = np.zeros(G.shape[0])
-            c0[0] = 1.0
-            for j, name in enumerate(part.linear):
-                if name in part.fixed:
-                    c0[1 + j] = -part.fixed[name]
-            S += float(c0 @ G @ c0)
-            free = part.free_cols
-            if free:
-                idx = self.lin_index[r]
-                A[np.ix_(idx, idx)] += G[np.ix_(free, free)]
-                b[idx] += G[free] @ c0
+            S += self._accumulate(G, r, A, b)
             slogf += slogf_r
             n += n_r
         if grams:
@@ -234,6 +224,23 @@ class _JointProblem:
             theta = np.zeros(0)
         ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
         return ll, (ps, theta, s2, A)
+
+    def _accumulate(self, G: np.ndarray, r: int, A: np.ndarray, b: np.ndarray) -> float:
+        """Add run ``r``'s filtered Gram matrix ``G`` to the joint GLS: its free linear
+        columns into ``A`` and ``b`` (in place), its residual sum of squares with the
+        fixed coefficients' columns taken off returned."""
+        part = self.parts[r]
+        c0 = np.zeros(G.shape[0])
+        c0[0] = 1.0
+        for j, name in enumerate(part.linear):
+            if name in part.fixed:
+                c0[1 + j] = -part.fixed[name]
+        free = part.free_cols
+        if free:
+            idx = self.lin_index[r]
+            A[np.ix_(idx, idx)] += G[np.ix_(free, free)]
+            b[idx] += G[free] @ c0
+        return float(c0 @ G @ c0)
 
     # -- the power-cycle protocol: absolute time, random-effect turn-on bias ----------
 
@@ -265,18 +272,7 @@ class _JointProblem:
                 else:
                     G = G - rho * np.outer(G[:, c], G[c]) / (1.0 + rho * h)
                     logdet += float(np.log1p(rho * h))
-            c0 = np.zeros(G.shape[0])
-            c0[0] = 1.0
-            part = self.parts[r]
-            for j, name in enumerate(part.linear):
-                if name in part.fixed:
-                    c0[1 + j] = -part.fixed[name]
-            S += float(c0 @ G @ c0)
-            free = part.free_cols
-            if free:
-                idx = self.lin_index[r]
-                A[np.ix_(idx, idx)] += G[np.ix_(free, free)]
-                bv[idx] += G[free] @ c0
+            S += self._accumulate(G, r, A, bv)
         if L:  # equilibrated: a trend counted from the first switch-on has a large column
             d = np.diag(A)
             d = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
