@@ -211,7 +211,6 @@ def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
     same parameters; ``fit`` is refitted jointly as :mod:`~.multirun` fits several runs
     (its shared parameters once, its per-run ones — bias, a warm-up's A and τ — once per
     run). One record: :func:`divergence`."""
-    from scipy.optimize import minimize
 
     from .multirun import per_run_names
 
@@ -220,23 +219,12 @@ def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
         s = _samples(t, np.zeros_like(t), temp, dt)
         recs.append(s.replace(drift=mean_response(truth, truth_params, s)))
     K = len(recs)
-    grids = []
-    for s in recs:
-        n = len(s)
-        w = 2.0 * np.pi * np.arange(1, n // 2 + 1) / n
-        grids.append((w, _spectrum(truth, truth_params, dt, w), n))
-    names = mean_parameters(fit, fit_params, recs[0])
-    if refit_noise:  # the noise levels, and the rates of processes no input goes through
-        names += [k for k in fit.param_names if fit.kind(k) in ("std", "rate")
-                  and k not in names and fit_params[k] > 0]
+    grids = _whittle_grids(truth, truth_params, recs, dt)
+    names = _refitted(fit, fit_params, recs[0], refit_noise)
     per = set(per_run_names(fit)) if K > 1 else set()
     # the searched point: a per-run parameter once per run (owner k), a shared one once
     slots = [(k, owner) for k in names for owner in (range(K) if k in per else [None])]
-    duration = max(float(t[-1] - t[0]) for t, _ in records)
-    bounds = {k: ((math.log(2.0 * dt), math.log(20.0 * max(duration, dt)))
-                  if fit.kind(k) == "time" else
-                  (math.log(1e-3 / max(duration, dt)), math.log(1.0 / dt))
-                  if fit.kind(k) == "rate" else (-math.inf, math.inf)) for k in names}
+    bounds = _log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in records), dt)
 
     def point(z: np.ndarray) -> list[dict[str, float]]:
         qs = [dict(fit_params) for _ in range(K)]
@@ -256,15 +244,58 @@ def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
     best = total(start)
     if not slots:
         return max(best, 0.0)
-    # the search's Λ (noise held) to 1 %, the report's to 0.1 %
+    fun, x = _nelder_mead(total, start, best, refit_noise)
+    if found is not None and fun < best:
+        # the shared values (a per-run one: its first run's) warm-start the next record
+        found.update({k: v for k, v in point(x)[0].items() if k in names})
+    return float(max(min(fun, best), 0.0))
+
+
+def _whittle_grids(truth: Model, truth_params: Mapping[str, float], recs: Sequence[Samples],
+                   dt: float) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """Each record's Fourier frequencies ω_j = 2πj/N, the truth's noise spectrum at them,
+    and N (the Whittle term of :func:`_whittle`)."""
+    grids = []
+    for s in recs:
+        n = len(s)
+        w = 2.0 * np.pi * np.arange(1, n // 2 + 1) / n
+        grids.append((w, _spectrum(truth, truth_params, dt, w), n))
+    return grids
+
+
+def _refitted(fit: Model, fit_params: Mapping[str, float], s: Samples, refit_noise: bool
+              ) -> list[str]:
+    """The wrong model's parameters searched in Λ's minimization: those its mean depends on
+    (:func:`mean_parameters`) and, with ``refit_noise``, the noise levels and the rates of
+    processes no input goes through."""
+    names = mean_parameters(fit, fit_params, s)
+    if refit_noise:
+        names += [k for k in fit.param_names if fit.kind(k) in ("std", "rate")
+                  and k not in names and fit_params[k] > 0]
+    return names
+
+
+def _log_bounds(fit: Model, names: Sequence[str], duration: float, dt: float
+                ) -> dict[str, tuple[float, float]]:
+    """The searched parameters' bounds in log: a time constant 2Δt .. 20 × the record, a
+    rate 1e-3 / the record .. 1/Δt, a noise level unbounded."""
+    return {k: ((math.log(2.0 * dt), math.log(20.0 * max(duration, dt)))
+                if fit.kind(k) == "time" else
+                (math.log(1e-3 / max(duration, dt)), math.log(1.0 / dt))
+                if fit.kind(k) == "rate" else (-math.inf, math.inf)) for k in names}
+
+
+def _nelder_mead(total: Callable[[np.ndarray], float], start: np.ndarray, best: float,
+                 refit_noise: bool) -> tuple[float, np.ndarray]:
+    """Nelder–Mead of Λ's ``total`` from ``start`` (where it is ``best``): (min, argmin).
+    The search's Λ (noise held) to 1 %, the report's to 0.1 %."""
+    from scipy.optimize import minimize
+
     tol = 1e-3 if refit_noise else 1e-2
     res = minimize(total, start, method="Nelder-Mead",
                    options={"xatol": tol, "fatol": tol * max(best, 1e-3),
-                            "maxfev": (200 if refit_noise else 25) * len(slots)})
-    if found is not None and res.fun < best:
-        # the shared values (a per-run one: its first run's) warm-start the next record
-        found.update({k: v for k, v in point(res.x)[0].items() if k in names})
-    return float(max(min(res.fun, best), 0.0))
+                            "maxfev": (200 if refit_noise else 25) * len(start)})
+    return float(res.fun), res.x
 
 
 def _spectrum(model: Model, params: Mapping[str, float], dt: float, w: np.ndarray

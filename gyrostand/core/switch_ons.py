@@ -39,12 +39,14 @@ from .model import Model, context
 from .separation import (
     _VERIFY_FIT,
     Rivals,
+    _log_bounds,
+    _nelder_mead,
+    _refitted,
     _samples,
-    _spectrum,
     _whittle,
+    _whittle_grids,
     divergence_runs,
     expected_lr,
-    mean_parameters,
     mean_response,
 )
 
@@ -267,7 +269,6 @@ def divergence_protocol(truth: Model, truth_params: Mapping[str, float], fit: Mo
     coefficients, mean parameters and (``refit_noise``) noise levels of the whitened
     distance (:func:`_protocol_distance`) plus each run's Whittle noise divergence. The
     random bias is in truth and fit alike, so it adds nothing to the noise term."""
-    from scipy.optimize import minimize
 
     if "bias.b" not in fit.param_names or "bias.b" not in truth.param_names:
         raise ModelError("a power-cycle protocol needs the bias term in both models")
@@ -276,20 +277,9 @@ def divergence_protocol(truth: Model, truth_params: Mapping[str, float], fit: Mo
     for (t, temp), d in zip(pc.runs, offsets, strict=True):
         s = _samples(t, np.zeros_like(t), temp, dt)
         recs.append(s.replace(drift=protocol_mean(truth, truth_params, s, d)))
-    grids = []
-    for s in recs:
-        n = len(s)
-        w = 2.0 * np.pi * np.arange(1, n // 2 + 1) / n
-        grids.append((w, _spectrum(truth, truth_params, dt, w), n))
-    names = mean_parameters(fit, fit_params, recs[0])
-    if refit_noise:
-        names += [k for k in fit.param_names if fit.kind(k) in ("std", "rate")
-                  and k not in names and fit_params[k] > 0]
-    duration = max(float(t[-1] - t[0]) for t, _ in pc.runs)
-    bounds = {k: ((math.log(2.0 * dt), math.log(20.0 * max(duration, dt)))
-                  if fit.kind(k) == "time" else
-                  (math.log(1e-3 / max(duration, dt)), math.log(1.0 / dt))
-                  if fit.kind(k) == "rate" else (-math.inf, math.inf)) for k in names}
+    grids = _whittle_grids(truth, truth_params, recs, dt)
+    names = _refitted(fit, fit_params, recs[0], refit_noise)
+    bounds = _log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in pc.runs), dt)
 
     def point(z: np.ndarray) -> dict[str, float]:
         q = dict(fit_params)
@@ -307,11 +297,8 @@ def divergence_protocol(truth: Model, truth_params: Mapping[str, float], fit: Mo
     best = total(start)
     if not names:
         return max(best, 0.0)
-    tol = 1e-3 if refit_noise else 1e-2
-    res = minimize(total, start, method="Nelder-Mead",
-                   options={"xatol": tol, "fatol": tol * max(best, 1e-3),
-                            "maxfev": (200 if refit_noise else 25) * len(names)})
-    return float(max(min(res.fun, best), 0.0))
+    fun, _ = _nelder_mead(total, start, best, refit_noise)
+    return float(max(min(fun, best), 0.0))
 
 
 def expected_lr_protocol(r: Rivals, pc: PowerCycle, dt: float) -> dict[str, float]:
