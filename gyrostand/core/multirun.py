@@ -307,27 +307,37 @@ class _JointProblem:
                               options={"xatol": 1e-10})
         return ll_at(float(np.exp(res.x)))
 
+    def _run_gram(self, q: Mapping[str, float], r: int
+                  ) -> tuple[np.ndarray, np.ndarray, float, float, int]:
+        """Run ``r``'s filtered Gram matrix at its natural parameters ``q`` (the trend's
+        column on the first switch-on's clock), the coefficient vector c = (1, −q) whose
+        quadratic form c'Gc is its residual sum of squares, h = 1'Σ_r⁻¹1 (the bias
+        column's own entry), ln det of the filter and the run's sample count."""
+        part = self.parts[r]
+        G, slogf, n = part.gram(q)
+        G = self.shifted(G, r)
+        c = self.bias_col
+        assert c is not None
+        cvec = np.zeros(G.shape[0])
+        cvec[0] = 1.0
+        for j, name in enumerate(part.linear):
+            cvec[1 + j] = -q[name]
+        return G, cvec, float(G[c, c]), slogf, n
+
     def random_effects(self, p: Mapping[str, float]) -> list[float]:
         """Each run's turn-on bias at natural joint parameters ``p``: μ + δ_r c + û_r,
         û_r = E[u_r | run r] (the BLUP, 0 without a random effect), for the run's own
         parameters (its residuals, its ln L at the joint estimate)."""
         out = []
-        for r, part in enumerate(self.parts):
+        for r in range(self.n_runs):
             q = self.run_params(p, r)
             base = q[BIAS] + (self.offsets[r] * q[TREND] if self.trend_col is not None
                               else 0.0)
             u = 0.0
             if self.spread is not None and self.spread > 0:
-                G = self.shifted(part.gram(q)[0], r)
-                c = self.bias_col
-                assert c is not None
-                cvec = np.zeros(G.shape[0])
-                cvec[0] = 1.0
-                for j, name in enumerate(part.linear):
-                    cvec[1 + j] = -q[name]
-                h = float(G[c, c])
+                G, cvec, h, _, _ = self._run_gram(q, r)
                 sb2 = self.spread ** 2
-                u = sb2 * float(G[c] @ cvec) / (1.0 + sb2 * h)
+                u = sb2 * float(G[self.bias_col] @ cvec) / (1.0 + sb2 * h)
             out.append(base + u)
         return out
 
@@ -336,24 +346,15 @@ class _JointProblem:
         its turn-on bias integrated out: −½[n ln 2π + ln det Σ_r + ln(1 + σ_b² h_r) + r'V⁻¹r]."""
         out = []
         sb2 = (self.spread or 0.0) ** 2
-        for r, part in enumerate(self.parts):
-            q = self.run_params(p, r)
-            G, slogf, n = part.gram(q)
+        for r in range(self.n_runs):
+            G, cvec, h, slogf, n = self._run_gram(self.run_params(p, r), r)
             if not np.isfinite(slogf):
                 out.append(-np.inf)
                 continue
-            G = self.shifted(G, r)
-            c = self.bias_col
-            assert c is not None
-            cvec = np.zeros(G.shape[0])
-            cvec[0] = 1.0
-            for j, name in enumerate(part.linear):
-                cvec[1 + j] = -q[name]
-            h = float(G[c, c])
             quad = float(cvec @ G @ cvec)
             logdet = 0.0
             if sb2 > 0:
-                gc = float(G[c] @ cvec)
+                gc = float(G[self.bias_col] @ cvec)
                 quad -= sb2 * gc * gc / (1.0 + sb2 * h)
                 logdet = float(np.log1p(sb2 * h))
             out.append(float(-0.5 * (n * LOG_2PI + slogf + logdet + quad)))
