@@ -441,13 +441,19 @@ def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
                     lrs.append(2.0 * (lt - lo))
                 if progress is not None:
                     progress(1)
-            arr = np.asarray(lrs)
-            doc[truth] = {"fitted_by": other, "failed": failed,
-                          "right_wins_lr": float(np.mean(arr > 0)) if arr.size else None,
-                          "right_wins_bic": float(np.mean(arr > penalty)) if arr.size else None,
-                          "mean_lr": float(np.mean(arr)) if arr.size else None}
+            doc[truth] = _wins(other, lrs, failed, penalty)
         out[label] = doc
     return out
+
+
+def _wins(other: str, lrs: Sequence[float], failed: int, penalty: float) -> dict[str, Any]:
+    """A verify's tally of one direction: how often the right model wins, by LR (> 0) and
+    by BIC (> ``penalty``), and the mean LR of the sets whose fits did not fail."""
+    arr = np.asarray(lrs)
+    return {"fitted_by": other, "failed": failed,
+            "right_wins_lr": float(np.mean(arr > 0)) if arr.size else None,
+            "right_wins_bic": float(np.mean(arr > penalty)) if arr.size else None,
+            "mean_lr": float(np.mean(arr)) if arr.size else None}
 
 
 #: design's defaults the command leaves out (cli/design.py: --legs, --min-soak)

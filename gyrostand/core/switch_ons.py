@@ -45,6 +45,7 @@ from .separation import (
     _samples,
     _whittle,
     _whittle_grids,
+    _wins,
     divergence_runs,
     expected_lr,
     mean_response,
@@ -436,10 +437,5 @@ def verify_protocol(r: Rivals, pc: PowerCycle, n: int, *, seed: int = 1,
                 lrs.append(2.0 * (lt - lo))
             if progress is not None:
                 progress(1)
-        arr = np.asarray(lrs)
-        out[truth] = {"fitted_by": other, "failed": failed,
-                      "right_wins_lr": float(np.mean(arr > 0)) if arr.size else None,
-                      "right_wins_bic": float(np.mean(arr > penalty)) if arr.size else None,
-                      "mean_lr": float(np.mean(arr)) if arr.size else None,
-                      "bic_threshold": penalty}
+        out[truth] = {**_wins(other, lrs, failed, penalty), "bic_threshold": penalty}
     return out
