@@ -88,13 +88,13 @@ def load_modules(modules: Iterable[str]) -> list[str]:
 
 def known_terms() -> tuple[str, ...]:
     """Every term a model may use now: the built-ins, then the registered plugins."""
-    from .core.terms import TERMS
+    from .core.terms.builtin import TERMS
 
     return tuple(TERMS)
 
 
 def _register(cls: Any, where: str) -> str:
-    from .core.terms import register
+    from .core.terms.builtin import register
 
     register(cls, where)
     return str(cls.name)
@@ -103,7 +103,7 @@ def _register(cls: Any, where: str) -> str:
 def _term_classes(obj: Any, where: str) -> list[Any]:
     """The Term subclasses an entry point or module provides: the class itself, a
     module's ``TERMS`` list, or the subclasses a module defines."""
-    from .core.terms import Term
+    from .core.terms.builtin import Term
 
     if isinstance(obj, type):
         if not issubclass(obj, Term):

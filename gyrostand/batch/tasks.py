@@ -169,7 +169,7 @@ def _run_info(run_dir: Path) -> dict[str, Any]:
 
 def _gyro_row(run_dir: Path, gyro: str, ginfo: dict[str, Any], opts: TaskOptions
               ) -> dict[str, Any]:
-    from ..core.identify import identify
+    from ..core.registry import identify
     from ..workbench import open_subject, run_diagnose
 
     row: dict[str, Any] = {"gyro": gyro, "bins": ginfo.get("bins"), "gaps": ginfo.get("gaps"),

@@ -1,7 +1,7 @@
 """Frames from a 1-s truth: the stand's electronics, simulated for any DBC layout.
 
 Input per gyro: arrays ``t`` (s, from 0, step Δt), ``drift`` (the drift signal's unit,
-deg/h in our DBC) and ``temp`` (degC), e.g. from ``gyrostand.core.simulate``. Output: a
+deg/h in our DBC) and ``temp`` (degC), e.g. from ``gyrostand.core.simulation``. Output: a
 time-ordered iterator of :class:`can.Message`, encoded by cantools.
 
 Channels that the mapping puts in the same message and multiplexer value form one

@@ -16,7 +16,7 @@ from ..runfolder.layout import RESULT
 from .common import add_format_args, emit
 
 if TYPE_CHECKING:
-    from ..core.allan import AllanTable
+    from ..core.diagnose.allan import AllanTable
     from ..workbench import Subject
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def _drift_unit(subject: Subject) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.ml import ml
+    from ..core.ml.fit import ml
     from ..render.views import AllanView
     from ..workbench import open_subject
 

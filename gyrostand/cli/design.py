@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design import case_temperature, design
+    from ..core.design.search import case_temperature, design
     from ..core.model import Model
     from ..errors import ModelError
 
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         return run_separate(args, given)
     reference_record = None
     if args.run is not None:
-        from ..core.ml import ml
+        from ..core.ml.fit import ml
         from ..workbench import open_subject
 
         subject = open_subject(args.run, gyro=args.gyro, model=args.model)
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
                      maxfev=args.evaluations, seed=args.seed, progress=bar.update)
     ref_label = "standard cycle"
     if reference_record is not None:
-        from ..core.fisher import crlb
+        from ..core.design.fisher import crlb
 
         t, temp = reference_record
         res.reference_predicted = crlb(model, params, t, temp, dt=float(np.median(np.diff(t))),
@@ -196,7 +196,7 @@ def program_document(program, limits) -> dict[str, Any]:
 
 def limits_of(args: argparse.Namespace, hours: float):
     """The chamber limits of the command line (°C/min and min converted to SI)."""
-    from ..core.design import ChamberLimits
+    from ..core.design.search import ChamberLimits
 
     return ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
                          hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
@@ -261,8 +261,8 @@ def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[s
     import numpy as np
 
     from .. import progress
-    from ..core.ml import ml
-    from ..core.simulate import simulate
+    from ..core.ml.fit import ml
+    from ..core.simulation import simulate
 
     out: dict[str, Any] = {"runs": n}
     for label, (t, temp) in (("designed", (limits.grid, case)), ("reference", reference)):

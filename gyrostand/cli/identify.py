@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = Model.parse(args.model)
     if len(args.samples) > 1:
-        from ..core.multirun import joint_ml
+        from ..core.ml.joint import joint_ml
 
         if args.method != "ml":
             raise ConfigError(f"several runs are identified jointly by ml only (--method "

@@ -12,7 +12,7 @@ from typing import Any
 from gyrostand.can.dbc import MessageRef, SignalRef
 from gyrostand.core import registry
 from gyrostand.core.names import VOCABULARY
-from gyrostand.core.registry import LkfOptions
+from gyrostand.core.options import LkfOptions
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ class ResultConfig:
 
 
 #: The online LKF of a gyro (its ``lkf:`` section): the lkf identifier's typed options
-#: (:class:`~gyrostand.core.registry.LkfOptions`; a value left out is estimated from a
+#: (:class:`~gyrostand.core.options.LkfOptions`; a value left out is estimated from a
 #: warm-up of ``warmup`` bins).
 LkfConfig = LkfOptions
 

@@ -23,7 +23,7 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
+def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
     """P = B (I − K H)' + K r K' with B = (I − K H) P and BH = B H', kept symmetric."""
     n = P.shape[0]
     for i in range(n):
@@ -146,7 +146,7 @@ def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     for j in range(n):
                         s += A[i, j]
                     AH[i] = s
-                _joseph_finish(P, A, AH, K, rk)
+                joseph_finish(P, A, AH, K, rk)
         # predict: x = F x ; P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
         for i in range(n):
             for c in range(m):
@@ -217,7 +217,7 @@ def kf_filtered_states(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
                     for j in range(n):
                         s += A[i, j]
                     AH[i] = s
-                _joseph_finish(P, A, AH, K, rk)
+                joseph_finish(P, A, AH, K, rk)
         for i in range(n):
             out[k, i] = x[i]
         for i in range(n):
@@ -299,7 +299,7 @@ def kf_step(x, P, A, Qd, H, r, z):  # pragma: no cover - compiled
         for j in range(n):
             s += B[i, j] * H[j]
         BH[i] = s
-    _joseph_finish(P, B, BH, K, r)
+    joseph_finish(P, B, BH, K, r)
     return e, f
 
 

@@ -147,7 +147,7 @@ class FitResult:
             d["parameter_units"] = {k: unit_text(e.unit, self.unit)
                                     for k, e in self.parameters.items()}
         d["warnings"] = list(self.warnings)
-        d["info"] = {k: v for k, v in self.info.items() if _jsonable(v)}
+        d["info"] = {k: v for k, v in self.info.items() if jsonable(v)}
         return d
 
     def summary(self) -> str:
@@ -161,13 +161,13 @@ class FitResult:
         return str(text.fit_result(self))
 
 
-def _jsonable(v: Any) -> bool:
+def jsonable(v: Any) -> bool:
     if isinstance(v, bool | int | str) or v is None:
         return True
     if isinstance(v, float):
         return math.isfinite(v)
     if isinstance(v, list | tuple):
-        return all(_jsonable(x) for x in v)
+        return all(jsonable(x) for x in v)
     if isinstance(v, dict):
-        return all(isinstance(k, str) and _jsonable(x) for k, x in v.items())
+        return all(isinstance(k, str) and jsonable(x) for k, x in v.items())
     return False

@@ -18,14 +18,15 @@ from importlib import resources
 from string import Template
 from typing import TYPE_CHECKING, Any
 
-from ..core.multirun import JointDiagnosis, JointFit
+from ..core.diagnose.joint import JointDiagnosis
+from ..core.ml.joint import JointFit
 from ..core.results import FitResult, unit_text
 from . import ByKind
 from . import text as _text
 from .views import AllanView, DiagnosisView, FitStepView, Plot, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
-    from ..core.candidates import Report
+    from ..core.diagnose.candidates import Report
     from ..session.final import GyroFinal
 
 __all__ = ["RENDERER", "page", "table", "figure", "e", "num"]

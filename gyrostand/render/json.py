@@ -7,7 +7,8 @@ import json
 from collections.abc import Callable
 from typing import Any
 
-from ..core.multirun import JointDiagnosis, JointFit
+from ..core.diagnose.joint import JointDiagnosis
+from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from . import ByKind
 from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary

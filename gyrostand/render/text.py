@@ -10,15 +10,16 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..core.multirun import JointDiagnosis, JointFit
+from ..core.diagnose.joint import JointDiagnosis
+from ..core.ml.joint import JointFit
 from ..core.results import DRIFT_UNIT, UNIT_TEXT, FitResult, unit_text
 from . import ByKind
 from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
-    from ..core.allan import AllanTable
-    from ..core.candidates import Report
-    from ..core.prederror import ModelError
+    from ..core.diagnose.allan import AllanTable
+    from ..core.diagnose.candidates import Report
+    from ..core.diagnose.prederror import ModelError
     from ..session.final import GyroFinal
 
 __all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step", "allan",

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..core.allan import AllanTable
-    from ..core.candidates import Report
+    from ..core.diagnose.allan import AllanTable
+    from ..core.diagnose.candidates import Report
     from ..core.results import FitResult
     from ..session.final import GyroFinal
     from ..session.pipeline import RunOutcome
@@ -71,8 +71,8 @@ class AllanView:
     def of(cls, subject: Subject, fit: FitResult, unit: str,
            level: float = 0.95) -> AllanView:
         """The tables of ``subject``'s drift: raw, and the residual after ``fit``'s model
-        (:func:`gyrostand.core.allan.drift_tables`)."""
-        from ..core.allan import drift_tables
+        (:func:`gyrostand.core.diagnose.allan.drift_tables`)."""
+        from ..core.diagnose.allan import drift_tables
 
         s = subject.samples
         raw, resid = drift_tables(s, fit, unit=unit, level=level)

@@ -13,9 +13,9 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from ..core.candidates import Report
 from ..core.data import Samples
-from ..core.diagnostics import allan_deviation
+from ..core.diagnose.candidates import Report
+from ..core.diagnose.diagnostics import allan_deviation
 from ..core.results import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 
@@ -410,7 +410,7 @@ def joint_biases(rep, sources: Sequence[str], unit: str) -> Figure:
     """The per-run turn-on biases with their 95 % intervals (the joint fit's std), their
     random-effects mean μ̂ ± its 95 % interval, and μ̂ ± the spread τ̂ (the turn-on-to-turn-on
     repeatability) with τ's interval in the title. ``rep``: a
-    :class:`~gyrostand.core.multirun.Repeatability`."""
+    :class:`~gyrostand.core.ml.joint.Repeatability`."""
     from scipy.stats import norm
 
     z = float(norm.ppf(0.5 + rep.level / 2))

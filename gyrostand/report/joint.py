@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..core.diagnose.joint import WHITE_ALPHA, JointDiagnosis
 from ..core.model import context
-from ..core.multirun import WHITE_ALPHA, JointDiagnosis
 from ..render import render
 from ..render.views import Plot
 from ..workbench import Subject
@@ -42,7 +42,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
     titles = []
     for r, (s, run) in enumerate(zip(samples, fit.runs, strict=True)):
         p = run.values
-        X = model.regressors(p, context(s))
+        X = model.regressors(p, context(s, model))
         det = X @ np.array([p[k] for k in lin]) if lin else np.zeros(len(s))
         dets.append(det)
         err = np.asarray(s.drift) - det

@@ -31,7 +31,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .. import __version__, progress
-from ..core.candidates import Report
+from ..core.diagnose.candidates import Report
 from ..core.model import context
 from ..render import render
 from ..render.views import AllanView, Plot, ReportPage
@@ -85,7 +85,7 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
         _atomic(path, lambda fh: fh.write(doc.encode("utf-8")))
         return path
     s = subject.samples
-    ctx = context(s)
+    ctx = context(s, rep.model)
     p = rep.fit.values
     lin = rep.model.names_of_kind("linear")
     X = rep.model.regressors(p, ctx)

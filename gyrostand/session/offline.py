@@ -28,7 +28,7 @@ from ..can.replay import replay
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
-from ..core.simulate import simulate
+from ..core.simulation import simulate
 from ..errors import ConfigError, GyrostandError
 from ..runfolder.layout import RESULT
 from .outputs import RunLog, make_run_dir, write_atomic

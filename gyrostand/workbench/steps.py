@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from ..core.candidates import Report, diagnose, fit_error
-from ..core.ml import ml
+from ..core.design.separation import design_command
+from ..core.diagnose.candidates import Report, diagnose, fit_error
+from ..core.diagnose.prederror import ModelError
+from ..core.ml.fit import ml
 from ..core.model import Model
-from ..core.prederror import ModelError
 from ..core.results import DRIFT_UNIT, FitResult
-from ..core.separation import design_command
 from ..errors import GyrostandError, OutputError
 from .ledger import append_ledger
 from .subject import Subject

@@ -10,13 +10,13 @@ silently dropped from the cross-correlation).
 import numpy as np
 import pytest
 
-from gyrostand.core import terms
-from gyrostand.core.diagnostics import candidate_regressor
-from gyrostand.core.lkf import OnlineLKF, lkf_layout, lkf_terms
+from gyrostand.core.diagnose.diagnostics import candidate_regressor
+from gyrostand.core.lkf.filter import OnlineLKF, lkf_layout, lkf_terms
 from gyrostand.core.model import Model, StateSpace, context
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
-from gyrostand.core.terms import NULLS, ROLES, TERMS, Param, Term, register, separation
+from gyrostand.core.simulation import simulate
+from gyrostand.core.terms import builtin as terms
+from gyrostand.core.terms.builtin import NULLS, ROLES, TERMS, Param, Term, register, separation
 from gyrostand.errors import ModelError
 
 from ..conftest import truth
@@ -56,7 +56,7 @@ def test_built_in_facts_are_consistent():
 
 
 def test_every_candidate_has_a_signature_or_says_why_not(c1_samples):
-    ctx = context(c1_samples)
+    ctx = context(c1_samples, Model.parse("markov,temp"))
     p = {"markov.beta": 0.03, "temp.gamma": -0.01, "warmup.tau": 100.0}
     sig = {}
     for name, cls in TERMS.items():
@@ -74,7 +74,7 @@ def test_every_candidate_has_a_signature_or_says_why_not(c1_samples):
 
 
 def test_a_term_without_a_signature_or_a_causal_regressor_is_named(bare, c1_samples):
-    ctx = context(c1_samples)
+    ctx = context(c1_samples, Model.parse("markov,temp"))
     with pytest.raises(ModelError, match="'bare_test_term' has no diagnostic signature"):
         candidate_regressor("bare_test_term", ctx, {})
     m = Model.parse("markov,temp,bare_test_term")
@@ -97,7 +97,7 @@ def test_register_refuses_a_clash_and_assigns_the_next_bit(monkeypatch):
         params = (Param("b", "linear", "y", "offset"),)
 
     with pytest.raises(ModelError, match=r"clashes with the built-in term 'bias' "
-                                         r"\(gyrostand\.core\.terms\.Bias\)"):
+                                         r"\(gyrostand\.core\.terms\.builtin\.Bias\)"):
         register(MyBias, "mine.MyBias")
 
     class Ok(Term):

@@ -181,7 +181,7 @@ def test_identify_with_a_plugin_term_from_a_csv(installed, tmp_path):
         "load_entry_points()\n"
         "from gyrostand.core.model import Model\n"
         "from gyrostand.core.profiles import TemperatureProfile\n"
-        "from gyrostand.core.simulate import simulate\n"
+        "from gyrostand.core.simulation import simulate\n"
         f"prof = TemperatureProfile.from_breakpoints({PROFILE!r})\n"
         "m = Model.parse('markov,temp,bias,temp_step')\n"
         f"s = simulate(m, {TRUTH!r}, prof, seed=11)\n"

@@ -14,7 +14,7 @@ from matplotlib.image import imread
 
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
-from gyrostand.core.lkf import lkf
+from gyrostand.core.lkf.filter import lkf
 from gyrostand.core.model import Model
 from gyrostand.report import default_dir, write_report
 from gyrostand.report.page import png_size

@@ -225,7 +225,7 @@ def test_a_model_terms_mask_wider_than_its_signal_is_refused_at_load_and_never_s
 
 
 def test_a_gyro_s_identifier_options_come_from_the_registry_and_its_lkf_section():
-    from gyrostand.core.registry import LkfOptions, LsqOptions, MlOptions
+    from gyrostand.core.options import LkfOptions, LsqOptions, MlOptions
 
     d = copy.deepcopy(demo_dict())
     d["gyros"][0]["lkf"] = {"beta0": 0.02, "variant": "paper"}

@@ -45,10 +45,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import GyrostandError, ModelError
-from .data import Samples
-from .design import ChamberLimits, Program, case_temperature, search, standard_cycle
-from .model import Model, context
+from ...errors import GyrostandError, ModelError
+from ..data import Samples
+from ..model import Model, context
+from .search import ChamberLimits, Program, case_temperature, search, standard_cycle
 
 if TYPE_CHECKING:
     from .switch_ons import PowerCycleResult, SwitchOnResult
@@ -60,7 +60,7 @@ __all__ = ["Rivals", "SeparationResult", "rivals", "expected_lr", "separate", "t
 
 #: verify's ML fits: only ln L is used (no standard errors); the best start (the model's
 #: own parameters among them) refined
-_VERIFY_FIT = {"n_local": 1, "std_errors": False}
+VERIFY_FIT = {"n_local": 1, "std_errors": False}
 #: a designed/reference gain below which the result also shows a longer run's Λ, and
 #: how many times longer
 WEAK_GAIN, LONGER = 2.0, 2.0
@@ -98,8 +98,8 @@ def rivals(model: Model, a: str, b: str, given: Mapping[str, float], t: np.ndarr
     """The rivals of ``a`` and ``b`` on ``model``'s base. ``given``: parameter values; a
     model whose parameters are not all given gets its pseudo-true look-alike of the other
     (its ML fit to a record simulated from the other on ``t``, ``temp``)."""
-    from .ml import ml
-    from .simulate import simulate
+    from ..ml.fit import ml
+    from ..simulation import simulate
 
     ma, mb = rival_models(model, a, b)
     pa = {n: float(given[n]) for n in ma.param_names if n in given}
@@ -118,14 +118,14 @@ def rivals(model: Model, a: str, b: str, given: Mapping[str, float], t: np.ndarr
     return Rivals(a, b, ma, mb, pa, pb)
 
 
-def _samples(t: np.ndarray, y: np.ndarray, temp: np.ndarray, dt: float) -> Samples:
+def design_samples(t: np.ndarray, y: np.ndarray, temp: np.ndarray, dt: float) -> Samples:
     return Samples(np.asarray(t, dtype=float), np.asarray(y, dtype=float),
                    np.asarray(temp, dtype=float), float(dt), source="design --separate")
 
 
 def mean_response(model: Model, params: Mapping[str, float], s: Samples) -> np.ndarray:
     """μ = X θ: the model's deterministic response on the record ``s``."""
-    X = model.regressors(params, context(s))
+    X = model.regressors(params, context(s, model))
     theta = np.array([params[n] for n in model.names_of_kind("linear")])
     return X @ theta if theta.size else np.zeros(len(s))
 
@@ -140,7 +140,7 @@ def _joint_distance(fit: Model, params: Sequence[Mapping[str, float]],
     """The same over several runs (run k at ``params[k]``): one least squares over the
     stacked whitened runs, a shared linear coefficient one column, a per-run one
     (:func:`~.multirun.per_run_names`: the bias, a warm-up's amplitude) a column per run."""
-    from .multirun import per_run_names
+    from ..ml.joint_problem import per_run_names
 
     lin = fit.names_of_kind("linear")
     per = set(per_run_names(fit))
@@ -148,7 +148,7 @@ def _joint_distance(fit: Model, params: Sequence[Mapping[str, float]],
             for k in (range(len(records)) if n in per and len(records) > 1 else [None])]
     ys, blocks = [], []
     for k, (q, s) in enumerate(zip(params, records, strict=True)):
-        X = fit.regressors(q, context(s))
+        X = fit.regressors(q, context(s, fit))
         E, f = fit.filter_columns(q, s, X)
         ok = np.isfinite(E[:, 0]) & (f > 0)
         W = E[ok] / np.sqrt(f[ok])[:, None]
@@ -170,19 +170,19 @@ def _joint_distance(fit: Model, params: Sequence[Mapping[str, float]],
 def mean_parameters(fit: Model, params: Mapping[str, float], s: Samples) -> list[str]:
     """The nonlinear parameters (``rate``, ``time``) the model's mean response depends on
     (markov.beta through an input term, a time constant): what a refit moves to mimic."""
-    ctx = context(s)
+    ctx = context(s, fit)
     X0 = fit.regressors(params, ctx)
     out = []
     for n in fit.param_names:
         if fit.kind(n) in ("rate", "time"):
             q = dict(params)
             q[n] *= 1.01
-            if not np.allclose(fit.regressors(q, context(s)), X0, rtol=0, atol=0):
+            if not np.allclose(fit.regressors(q, ctx), X0, rtol=0, atol=0):
                 out.append(n)
     return out
 
 
-def _whittle(S0: np.ndarray, fit: Model, params: Mapping[str, float], w: np.ndarray,
+def whittle_loglik(S0: np.ndarray, fit: Model, params: Mapping[str, float], w: np.ndarray,
              dt: float, n: int) -> float:
     """N · mean_j [ρ_j − 1 − ln ρ_j], ρ = S_truth/S_fit: 2 KL of the noises (Whittle)."""
     rho = S0 / _spectrum(fit, params, dt, w)
@@ -212,19 +212,19 @@ def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
     (its shared parameters once, its per-run ones — bias, a warm-up's A and τ — once per
     run). One record: :func:`divergence`."""
 
-    from .multirun import per_run_names
+    from ..ml.joint_problem import per_run_names
 
     recs = []
     for t, temp in records:
-        s = _samples(t, np.zeros_like(t), temp, dt)
+        s = design_samples(t, np.zeros_like(t), temp, dt)
         recs.append(s.replace(drift=mean_response(truth, truth_params, s)))
     K = len(recs)
-    grids = _whittle_grids(truth, truth_params, recs, dt)
-    names = _refitted(fit, fit_params, recs[0], refit_noise)
+    grids = whittle_grids(truth, truth_params, recs, dt)
+    names = refitted_params(fit, fit_params, recs[0], refit_noise)
     per = set(per_run_names(fit)) if K > 1 else set()
     # the searched point: a per-run parameter once per run (owner k), a shared one once
     slots = [(k, owner) for k in names for owner in (range(K) if k in per else [None])]
-    bounds = _log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in records), dt)
+    bounds = log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in records), dt)
 
     def point(z: np.ndarray) -> list[dict[str, float]]:
         qs = [dict(fit_params) for _ in range(K)]
@@ -238,23 +238,23 @@ def divergence_runs(truth: Model, truth_params: Mapping[str, float], fit: Model,
     def total(z: np.ndarray) -> float:
         qs = point(z)
         return _joint_distance(fit, qs, recs) + sum(
-            _whittle(S0, fit, q, w, dt, n) for q, (w, S0, n) in zip(qs, grids, strict=True))
+            whittle_loglik(S0, fit, q, w, dt, n) for q, (w, S0, n) in zip(qs, grids, strict=True))
 
     start = np.array([math.log(fit_params[k]) for k, _ in slots])
     best = total(start)
     if not slots:
         return max(best, 0.0)
-    fun, x = _nelder_mead(total, start, best, refit_noise)
+    fun, x = nelder_mead(total, start, best, refit_noise)
     if found is not None and fun < best:
         # the shared values (a per-run one: its first run's) warm-start the next record
         found.update({k: v for k, v in point(x)[0].items() if k in names})
     return float(max(min(fun, best), 0.0))
 
 
-def _whittle_grids(truth: Model, truth_params: Mapping[str, float], recs: Sequence[Samples],
+def whittle_grids(truth: Model, truth_params: Mapping[str, float], recs: Sequence[Samples],
                    dt: float) -> list[tuple[np.ndarray, np.ndarray, int]]:
     """Each record's Fourier frequencies ω_j = 2πj/N, the truth's noise spectrum at them,
-    and N (the Whittle term of :func:`_whittle`)."""
+    and N (the Whittle term of :func:`whittle_loglik`)."""
     grids = []
     for s in recs:
         n = len(s)
@@ -263,7 +263,7 @@ def _whittle_grids(truth: Model, truth_params: Mapping[str, float], recs: Sequen
     return grids
 
 
-def _refitted(fit: Model, fit_params: Mapping[str, float], s: Samples, refit_noise: bool
+def refitted_params(fit: Model, fit_params: Mapping[str, float], s: Samples, refit_noise: bool
               ) -> list[str]:
     """The wrong model's parameters searched in Λ's minimization: those its mean depends on
     (:func:`mean_parameters`) and, with ``refit_noise``, the noise levels and the rates of
@@ -275,7 +275,7 @@ def _refitted(fit: Model, fit_params: Mapping[str, float], s: Samples, refit_noi
     return names
 
 
-def _log_bounds(fit: Model, names: Sequence[str], duration: float, dt: float
+def log_bounds(fit: Model, names: Sequence[str], duration: float, dt: float
                 ) -> dict[str, tuple[float, float]]:
     """The searched parameters' bounds in log: a time constant 2Δt .. 20 × the record, a
     rate 1e-3 / the record .. 1/Δt, a noise level unbounded."""
@@ -285,7 +285,7 @@ def _log_bounds(fit: Model, names: Sequence[str], duration: float, dt: float
                 if fit.kind(k) == "rate" else (-math.inf, math.inf)) for k in names}
 
 
-def _nelder_mead(total: Callable[[np.ndarray], float], start: np.ndarray, best: float,
+def nelder_mead(total: Callable[[np.ndarray], float], start: np.ndarray, best: float,
                  refit_noise: bool) -> tuple[float, np.ndarray]:
     """Nelder–Mead of Λ's ``total`` from ``start`` (where it is ``best``): (min, argmin).
     The search's Λ (noise held) to 1 %, the report's to 0.1 %."""
@@ -403,9 +403,10 @@ def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
     search started at its own parameters) and count how often the right model wins: by
     likelihood (LR > 0) and by BIC (LR > Δp ln N, a per-run parameter counted once per
     run); the realized mean LR = 2 (ln L_right − ln L_wrong)."""
-    from .ml import ml
-    from .multirun import joint_ml, per_run_names
-    from .simulate import simulate
+    from ..ml.fit import ml
+    from ..ml.joint import joint_ml
+    from ..ml.joint_problem import per_run_names
+    from ..simulation import simulate
 
     out: dict[str, Any] = {"runs": n}
     for k, (label, rec) in enumerate(records.items()):
@@ -428,11 +429,11 @@ def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
                                seed=rng) for t, temp in runs]
                 try:
                     if len(ss) == 1:
-                        lt = ml(ss[0], mt, start=pt, **_VERIFY_FIT).loglik
-                        lo = ml(ss[0], mo, start=po, **_VERIFY_FIT).loglik
+                        lt = ml(ss[0], mt, start=pt, **VERIFY_FIT).loglik
+                        lo = ml(ss[0], mo, start=po, **VERIFY_FIT).loglik
                     else:
-                        lt = joint_ml(ss, mt, start=pt, **_VERIFY_FIT).loglik
-                        lo = joint_ml(ss, mo, start=po, **_VERIFY_FIT).loglik
+                        lt = joint_ml(ss, mt, start=pt, **VERIFY_FIT).loglik
+                        lo = joint_ml(ss, mo, start=po, **VERIFY_FIT).loglik
                 except GyrostandError as exc:
                     log.warning("verify: a fit failed: %s", exc)
                     failed += 1
@@ -441,12 +442,12 @@ def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
                     lrs.append(2.0 * (lt - lo))
                 if progress is not None:
                     progress(1)
-            doc[truth] = _wins(other, lrs, failed, penalty)
+            doc[truth] = tally_wins(other, lrs, failed, penalty)
         out[label] = doc
     return out
 
 
-def _wins(other: str, lrs: Sequence[float], failed: int, penalty: float) -> dict[str, Any]:
+def tally_wins(other: str, lrs: Sequence[float], failed: int, penalty: float) -> dict[str, Any]:
     """A verify's tally of one direction: how often the right model wins, by LR (> 0) and
     by BIC (> ``penalty``), and the mean LR of the sets whose fits did not fail."""
     arr = np.asarray(lrs)
@@ -468,7 +469,7 @@ def run_limits(samples: Samples) -> dict[str, float]:
     lo, hi = math.floor(float(np.min(temp))), math.ceil(float(np.max(temp)))
     if hi <= lo:
         lo, hi = lo - 1, hi + 1
-    rate = float(np.max(np.abs(context(samples).temp_rate))) * 60.0
+    rate = float(np.max(np.abs(context(samples, None).temp_rate))) * 60.0
     hours = float(samples.t[-1] - samples.t[0]) / 3600.0
     soak = min(_MIN_SOAK_MIN, math.floor(hours * 60.0 / (2 * _LEGS) * 10) / 10)
     return {"t_min": float(lo), "t_max": float(hi),
@@ -506,9 +507,10 @@ def time_only(r: Rivals) -> bool:
     """Both rivals' own terms add a deterministic mean that is a function of the time since
     switch-on alone (trend, warmup): no temperature program changes how alike they look."""
     t = np.arange(0.0, 600.0)
-    flat = context(_samples(t, t * 0, np.full_like(t, 20.0), 1.0))
-    ramp = context(_samples(t, t * 0, 20.0 + 0.05 * t, 1.0))
+    flat_s = design_samples(t, t * 0, np.full_like(t, 20.0), 1.0)
+    ramp_s = design_samples(t, t * 0, 20.0 + 0.05 * t, 1.0)
     for model, term, params in ((r.model_a, r.a, r.params_a), (r.model_b, r.b, r.params_b)):
+        flat, ramp = context(flat_s, model), context(ramp_s, model)
         names = _term_params(model, term)
         if not names:
             return False

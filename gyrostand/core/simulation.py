@@ -50,7 +50,7 @@ def simulate(
     t = np.asarray(t, dtype=float)
     temp = np.asarray(temp, dtype=float)
     base = Samples.from_arrays(t, np.zeros_like(t), temp, dt=dt, source="simulation")
-    X = model.regressors(params, context(base))
+    X = model.regressors(params, context(base, model))
     theta = np.array([params[n] for n in model.names_of_kind("linear")])
     y = X @ theta if theta.size else np.zeros_like(t)
     ss = model.state_space(params, dt)

@@ -14,7 +14,7 @@ with s the step's slope and φ = e^{−Δt/τ},
     T_c[k] = T_s[k] − sτ + φ (T_c[k−1] − T_s[k−1] + sτ),
 
 and the model sees T_c. The information a program gives is the expected Fisher
-information I(θ) of the exact likelihood on T_c (:func:`~gyrostand.core.fisher.fisher_information`;
+information I(θ) of the exact likelihood on T_c (:func:`~gyrostand.core.design.fisher.fisher_information`;
 its block of the linear coefficients is exact, the rest a Monte Carlo average over
 ``n_mc`` simulated records with common random numbers, so the objective is a smooth,
 deterministic function of the program). Goals, minimized over the program:
@@ -38,10 +38,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ModelError
+from ...errors import ModelError
+from ..model import Model
+from ..profiles import TemperatureProfile
 from .fisher import fisher_information
-from .model import Model
-from .profiles import TemperatureProfile
 
 __all__ = ["ChamberLimits", "Program", "DesignResult", "case_temperature",
            "standard_cycle", "zigzag", "predicted_std", "design", "search", "GOALS"]

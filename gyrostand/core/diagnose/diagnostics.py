@@ -1,6 +1,6 @@
 """Where the model fails: residual analysis of a maximum-likelihood fit.
 
-Everything here works on a :class:`FitResult` of :func:`gyrostand.core.ml.ml` and the
+Everything here works on a :class:`FitResult` of :func:`gyrostand.core.ml.fit.ml` and the
 samples it was fitted to:
 
 * one-step innovations e_k and their standardized form e_k/√f_k (white N(0, 1) when the
@@ -21,33 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from .chisq import chi2_ppf, chi2_sf
-from .data import Samples
-from .kalman import kf_run, kf_smooth
-from .model import Model, context
-from .results import FitResult
-from .terms import TERMS, Context, term_class
+from ..chisq import chi2_ppf, ljung_box
+from ..data import Samples
+from ..kalman import kf_run, kf_smooth
+from ..model import Model, context
+from ..results import FitResult
+from ..terms.builtin import TERMS, Context, term_class
 
 #: |dT/dt| below this (degC/s) is a soak: 0.05 degC/min
 SOAK_RATE = 0.05 / 60.0
 #: shortest segment reported (s)
 MIN_SEGMENT_S = 120.0
-
-
-def ljung_box(z: np.ndarray, lags: int) -> tuple[float, float]:
-    """Ljung–Box Q statistic of ``z`` (NaN skipped) for ``lags`` lags, and its p-value.
-
-    Q = n(n+2) Σ_{k=1..h} ρ_k² / (n − k),  Q ~ χ²(h) for white noise.
-    """
-    z = z[np.isfinite(z)]
-    n = z.size
-    z = z - z.mean()
-    d = float(z @ z)
-    if n <= lags + 1 or d == 0:
-        return 0.0, 1.0
-    rho = np.array([float(z[k:] @ z[:-k]) / d for k in range(1, lags + 1)])
-    q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
-    return q, chi2_sf(q, lags)
 
 
 def autocorrelation(z: np.ndarray, lags: int) -> np.ndarray:
@@ -116,7 +100,7 @@ def segments(ctx: Context) -> list[dict[str, Any]]:
 
 def candidate_regressor(term: str, ctx: Context, p: Mapping[str, float]) -> np.ndarray | None:
     """The signature of a candidate effect in the data (before filtering): the term's own
-    :meth:`~gyrostand.core.term_base.Term.signature` (output effects their regressor,
+    :meth:`~gyrostand.core.terms.base.Term.signature` (output effects their regressor,
     input effects their response through the drift dynamics, ``temp_lag`` the change a
     small lag makes). None only where the term says so: it has no deterministic signature
     (``no_signature``: the random processes show in the autocorrelation instead), or the
@@ -173,7 +157,7 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
     """Residual diagnostics of an ML fit of ``result.model`` to ``samples``."""
     model: Model = result.model
     p = result.values
-    ctx = context(samples)
+    ctx = context(samples, model)
     e = np.asarray(result.residuals, dtype=float)
     f = np.asarray(result.residual_var, dtype=float)
     z = e / np.sqrt(f)

@@ -1,7 +1,7 @@
 """Allan-variance figures of a gyro, as IEEE Std 952 (Annex C) reports them.
 
 The overlapping Allan variance of a rate series x (sampled every Δt, averaged over
-τ = m·Δt; :func:`~gyrostand.core.diagnostics.allan_deviation`, octave-spaced m) of a gyro
+τ = m·Δt; :func:`~gyrostand.core.diagnose.diagnostics.allan_deviation`, octave-spaced m) of a gyro
 is the sum of its noise terms' contributions (IEEE Std 952-1997, C.1–C.5)::
 
     σ²(τ) = N²/τ  +  B_f²  +  K²·τ/3  +  R²·τ²/2
@@ -48,10 +48,10 @@ from typing import Any
 
 import numpy as np
 
-from .data import Samples
+from ..data import Samples
+from ..model import Model, context
+from ..results import FitResult
 from .diagnostics import allan_deviation
-from .model import Model, context
-from .results import FitResult
 
 __all__ = [
     "BIAS_FACTOR",
@@ -280,7 +280,7 @@ def thermal_residual(model: Model, params: Mapping[str, float], samples: Samples
     """The drift after the thermal model: y − (the model's deterministic part: γ·T through
     the drift's dynamics, bias and the other input/output terms), the stochastic part
     (Gauss–Markov, white noise, random walks) left in. Shape (N,), NaN at gaps."""
-    X = model.regressors(params, context(samples))
+    X = model.regressors(params, context(samples, model))
     theta = np.array([params[k] for k in model.names_of_kind("linear")])
     det = X @ theta if theta.size else np.zeros(len(samples))
     return np.asarray(samples.drift, dtype=float) - det

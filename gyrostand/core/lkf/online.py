@@ -9,13 +9,13 @@ With ε = ε₀(t) + δε, β = β₀ + δβ, γ = γ₀ + δγ, b = b₀ + δb 
 
 State ``[δε, δβ, (δθ_in…), (δθ_out…), (other processes…)]``: the parameter corrections
 are constant states. Each term says how it enters (its ``role``): an *input* term (``temp``,
-``temp2``) enters the δε row with its input u(T) (:meth:`~gyrostand.core.term_base.Term.
+``temp2``) enters the δε row with its input u(T) (:meth:`~gyrostand.core.terms.base.Term.
 input`) and drives ε₀ with its linearisation coefficient; an *output* term (``bias``,
 ``temp_rate``, ``hysteresis``, ``trend``, ``warmup`` with τ held, a plugin's) enters the
 measurement with its regressor x_k (a time-varying H, exact since it is linear), computed
-causally online (:meth:`~gyrostand.core.term_base.Term.causal_regressors`); a further
+causally online (:meth:`~gyrostand.core.terms.base.Term.causal_regressors`); a further
 random *process* (``random_walk``, ``markov2``) is stacked with its own dynamics
-(:meth:`~gyrostand.core.term_base.Term.states`) and enters the measurement with
+(:meth:`~gyrostand.core.terms.base.Term.states`) and enters the measurement with
 coefficient 1. A term the filter cannot represent (a ``modifier`` such as ``temp_lag``) is
 a ModelError naming it. Discretisation is exact in δε (φ₀ = e^{−β₀Δt}) with the inputs
 ε₀(t) and u(t) linear between samples.
@@ -29,10 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ModelError
-from .kalman import foh_weights, kf_step
-from .model import Model
-from .term_base import Bin, Scales, Term
+from ...errors import ModelError
+from ..kalman import foh_weights, kf_step
+from ..model import Model
+from ..terms.base import Bin, Scales, Term
 
 #: the paper's recommended linearisation point (MODEL.md: "of order 10^-4")
 PAPER_POINT = 1e-4
@@ -99,7 +99,7 @@ def held_names(model: Model) -> list[str]:
 
 def default_prior_std(model: Model, scales: Scales) -> dict[str, float]:
     """Each estimated coefficient's uninformative prior std, from its term
-    (:meth:`~gyrostand.core.term_base.Term.prior_std`) on the data's ``scales``."""
+    (:meth:`~gyrostand.core.terms.base.Term.prior_std`) on the data's ``scales``."""
     out: dict[str, float] = {}
     for t in model.terms:
         if t.name == "markov" or t.role in ("input", "output"):
@@ -181,7 +181,7 @@ class OnlineLKF:
     def default_prior_std(model: Model, dt: float, y0: float, T0: float,
                           y_scale: float, T_scale: float) -> dict[str, float]:
         """Uninformative priors on the scale of the data (each term's
-        :meth:`~gyrostand.core.term_base.Term.prior_std`): β ≤ 1/Δt; |γ| ≲ β|ε|/|T|
+        :meth:`~gyrostand.core.terms.base.Term.prior_std`): β ≤ 1/Δt; |γ| ≲ β|ε|/|T|
         (from the steady state γT = βε); |b| ≲ |y|; ..."""
         ys = abs(y0) + y_scale
         Ts = max(abs(T0), T_scale, 1e-6)

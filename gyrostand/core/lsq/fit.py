@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import IdentificationError, ModelError
-from .data import MIN_TEMP_SPAN, Samples
-from .model import Model
-from .results import Estimate, FitResult
-from .validate import prepare, require_samples
+from ...errors import IdentificationError, ModelError
+from ..data import MIN_TEMP_SPAN, Samples
+from ..model import Model
+from ..results import Estimate, FitResult
+from ..validate import prepare, require_samples
 
 SUPPORTED = {"markov", "temp", "bias", "white"}
 

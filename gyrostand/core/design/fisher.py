@@ -16,9 +16,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .data import Samples
-from .model import Model
-from .simulate import simulate
+from ..data import Samples
+from ..model import Model
+from ..simulation import simulate
 
 
 def fisher_information(

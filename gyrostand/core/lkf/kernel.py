@@ -1,6 +1,6 @@
 """Compiled pass of the linearised Kalman filter (numba), textbook symbols.
 
-One kernel, :func:`lkf_pass`, runs the LKF of :mod:`gyrostand.core.lkf` over the bins
+One kernel, :func:`lkf_pass`, runs the LKF of :mod:`gyrostand.core.lkf.filter` over the bins
 ``k0 .. k1-1`` of a stored record, in place on the filter's state, so the same code serves
 one new bin (online) and a re-filter of the whole history after a re-linearisation.
 
@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kalman import _joseph_finish
+from ..kalman import joseph_finish
 
 
 @njit(cache=True, nogil=True)
@@ -151,7 +151,7 @@ def lkf_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback,
             for j in range(n):
                 s += AP[i, j] * H[j]
             PH[i] = s
-        _joseph_finish(P, AP, PH, K, r)  # PH now holds (I − K H) P H'
+        joseph_finish(P, AP, PH, K, r)  # PH now holds (I − K H) P H'
     st[0] = eps0
     return s_nis, s_logf, nobs
 

@@ -1,4 +1,4 @@
-"""The converging LKF's held noise levels (:class:`~gyrostand.core.lkf_relin.RelinLKF`):
+"""The converging LKF's held noise levels (:class:`~gyrostand.core.lkf.relin.RelinLKF`):
 re-estimated at the current point, and their share of the estimate's covariance.
 
 :func:`reestimate`: the held noise levels the caller did not fix are searched at the
@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .kalman import NO_WEIGHTS, kf_run
-from .lkf_kernel import gm_profile
-from .term_base import Context
+from ..kalman import NO_WEIGHTS, kf_run
+from ..terms.base import Context
+from .kernel import gm_profile
 
 if TYPE_CHECKING:
-    from .lkf_relin import RelinLKF
+    from .relin import RelinLKF
 
 #: bounds of the searched noise ratio σ_v/σ
 RATIO_BOUNDS = (1e-3, 1e2)

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .data import Samples
-from .kalman import first_order_response, kf_filtered_states
-from .model import Model, context
+from ..data import Samples
+from ..kalman import first_order_response, kf_filtered_states
+from ..model import Model, context
 
 #: window lengths of the means (s)
 WINDOWS_S: tuple[float, ...] = (60.0, 600.0)
@@ -52,7 +52,7 @@ MIN_FILL = 0.5
 
 def deterministic_part(model: Model, p: Mapping[str, float], samples: Samples) -> np.ndarray:
     """``d = X(η) θ``: the model driven by the temperature (and time) alone, shape (N,)."""
-    X = model.regressors(p, context(samples))
+    X = model.regressors(p, context(samples, model))
     theta = np.array([p[n] for n in model.names_of_kind("linear")])
     return X @ theta if theta.size else np.zeros(len(samples))
 

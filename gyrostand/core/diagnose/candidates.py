@@ -62,17 +62,17 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..errors import DataError, GyrostandError
-from .chisq import chi2_sf, sup_chi2_sf
-from .data import Samples
+from ...errors import DataError, GyrostandError
+from ..chisq import chi2_sf, sup_chi2_sf
+from ..data import Samples
+from ..ml.fit import Problem, ml
+from ..ml.joint_problem import base_name
+from ..model import Model, context
+from ..results import DRIFT_UNIT, Estimate, FitResult, unit_text
+from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
+from ..validate import prepare
 from .diagnostics import Diagnosis, diagnose_fit, segments
-from .ml import _Problem, ml
-from .model import Model, context
-from .multirun import base_name
 from .prederror import ModelError, model_error
-from .results import DRIFT_UNIT, Estimate, FitResult, unit_text
-from .terms import POSITIVE_KINDS, TERMS, separation, term_class
-from .validate import prepare
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ MAX_THREADS = 4
 #: ln L rise that shows the current fit was not at its maximum
 REFIT_GAIN = 0.05
 #: the test's null hypothesis and the look-alikes are facts of each term
-#: (:attr:`~gyrostand.core.term_base.Term.null`, ``look_alikes``): see :func:`_extra_df`,
+#: (:attr:`~gyrostand.core.terms.base.Term.null`, ``look_alikes``): see :func:`_extra_df`,
 #: :func:`_halved` and :func:`look_alikes`
 FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, steps and "
                    "long soaks, repeated")
@@ -265,7 +265,7 @@ def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
     on the unit sphere: its length (L₁); half its boundary's length (L₁) and its area
     (L₂) for a two-parameter shape, from the angles between neighbouring grid points.
     Measured on clean 2-h cycles: Z(3 s)² of temp_rate 1.36, 2.29, 1.14 against its refit
-    LR at τ = 3 s of 1.35, 2.38, 1.19. θ spans the refit's own search range (:class:`~gyrostand.core.ml._Problem`'s
+    LR at τ = 3 s of 1.35, 2.38, 1.19. θ spans the refit's own search range (:class:`~gyrostand.core.ml.fit.Problem`'s
     bounds) on a log grid (:data:`SHAPE_POINTS`, :data:`SHAPE_POINTS_2D`).
     """
     with threadpool_limits(limits=1, user_api="blas"):  # tiny algebra: see ml.ml
@@ -295,7 +295,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     ``base`` their joint fit, :func:`~.multirun.joint_ml`): the score is the sum of the
     runs' scores, so u(θ) stacks the runs' whitened regressors, and the metric is that of
     the joint fit (a per-run coefficient, the bias, has its own column in each run)."""
-    from .multirun import _JointProblem, run_key
+    from ..ml.joint_problem import JointProblem, run_key
 
     runs = _runs(samples)
     joint = isinstance(samples, tuple)
@@ -303,7 +303,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     bigger = model.add(term)
     shapes = shape_params(bigger, term)
     if joint:
-        prob: Any = _JointProblem(bigger, used_runs, {})
+        prob: Any = JointProblem(bigger, used_runs, {})
         per_run = prob.per_run
 
         def jname(n: str, r: int) -> str:
@@ -312,7 +312,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         bounds = [prob.bounds[prob.znames.index(jname(n, 0))] for n in shapes]
         run_values = [prob.run_params(base.values, r) for r in range(len(runs))]
     else:
-        bounds = [(lambda pr: pr.bounds[pr.znames.index(n)])(_Problem(bigger, used_runs[0], {}))
+        bounds = [(lambda pr: pr.bounds[pr.znames.index(n)])(Problem(bigger, used_runs[0], {}))
                   for n in shapes]
         run_values = [dict(base.values)]
 
@@ -323,7 +323,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     (lin,) = owner.linear
     parts = []  # per run: (ctx, used, p0, ok, scale, whitened tangents, their joint names)
     for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):
-        ctx = context(used)
+        ctx = context(used, bigger)
         names, Tx = _mean_tangents(model, vals, ctx)
         E, f = model.filter_columns(vals, used, Tx)
         ok = np.isfinite(E[:, 0]) & (f > 0)
@@ -469,7 +469,7 @@ def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
     (a tuple of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
     start = base.values if base is not None else None
     if isinstance(samples, tuple):
-        from .multirun import joint_ml
+        from ..ml.joint import joint_ml
 
         return joint_ml(samples, model, start=start,  # type: ignore[return-value]
                         n_local=2 if base is not None else None, hessian_passes=1)
@@ -492,7 +492,7 @@ def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) 
 
 def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
     """A shape parameter at a search bound where its shape is still physical (a thermal
-    lag of a few Δt: none measurable; :class:`~gyrostand.core.term_base.Param`'s
+    lag of a few Δt: none measurable; :class:`~gyrostand.core.terms.base.Param`'s
     ``physical_bounds``)."""
     q = dict(model.params)[base_name(name)]  # a run's own copy (name@k): its term's
     return any(f"ml: {name} is at its {side} search bound" in w
@@ -537,7 +537,7 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
     CPU time in all; wall clock ~1/CPUs of it on an idle machine). Each fit is the same
     deterministic computation whichever thread runs it: the results do not depend on the
     number of threads. BLAS is held to one thread around the pool (the algebra is on
-    tiny matrices; see :func:`~gyrostand.core.ml.ml`).
+    tiny matrices; see :func:`~gyrostand.core.ml.fit.ml`).
     """
     def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float,
                                 tuple[float, ...]]:
@@ -652,7 +652,7 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
 def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT) -> ModelError:
     """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
     used = prepare(samples, "model error")
-    return model_error(fit.model, fit.values, used, segments(context(used)), unit=unit)
+    return model_error(fit.model, fit.values, used, segments(context(used, None)), unit=unit)
 
 
 def _refit_from_candidates(samples: Samples, model: Model, fit: FitResult,

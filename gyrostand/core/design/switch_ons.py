@@ -32,23 +32,23 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GyrostandError, ModelError
-from .data import Samples
-from .design import ChamberLimits, case_temperature, standard_cycle
-from .model import Model, context
+from ...errors import GyrostandError, ModelError
+from ..data import Samples
+from ..model import Model, context
+from .search import ChamberLimits, case_temperature, standard_cycle
 from .separation import (
-    _VERIFY_FIT,
+    VERIFY_FIT,
     Rivals,
-    _log_bounds,
-    _nelder_mead,
-    _refitted,
-    _samples,
-    _whittle,
-    _whittle_grids,
-    _wins,
+    design_samples,
     divergence_runs,
     expected_lr,
+    log_bounds,
     mean_response,
+    nelder_mead,
+    refitted_params,
+    tally_wins,
+    whittle_grids,
+    whittle_loglik,
 )
 
 log = logging.getLogger(__name__)
@@ -230,7 +230,7 @@ def _protocol_distance(fit: Model, params: Sequence[Mapping[str, float]],
     it = lin.index("trend.c") if "trend.c" in lin else None
     blocks = []
     for q, s, d in zip(params, records, offsets, strict=True):
-        X = fit.regressors(q, context(s))
+        X = fit.regressors(q, context(s, fit))
         if it is not None:
             X = X.copy()
             X[:, it] += d
@@ -276,11 +276,11 @@ def divergence_protocol(truth: Model, truth_params: Mapping[str, float], fit: Mo
     offsets = pc.starts
     recs = []
     for (t, temp), d in zip(pc.runs, offsets, strict=True):
-        s = _samples(t, np.zeros_like(t), temp, dt)
+        s = design_samples(t, np.zeros_like(t), temp, dt)
         recs.append(s.replace(drift=protocol_mean(truth, truth_params, s, d)))
-    grids = _whittle_grids(truth, truth_params, recs, dt)
-    names = _refitted(fit, fit_params, recs[0], refit_noise)
-    bounds = _log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in pc.runs), dt)
+    grids = whittle_grids(truth, truth_params, recs, dt)
+    names = refitted_params(fit, fit_params, recs[0], refit_noise)
+    bounds = log_bounds(fit, names, max(float(t[-1] - t[0]) for t, _ in pc.runs), dt)
 
     def point(z: np.ndarray) -> dict[str, float]:
         q = dict(fit_params)
@@ -292,13 +292,13 @@ def divergence_protocol(truth: Model, truth_params: Mapping[str, float], fit: Mo
     def total(z: np.ndarray) -> float:
         q = point(z)
         return _protocol_distance(fit, [q] * len(recs), recs, offsets, pc.spread) + sum(
-            _whittle(S0, fit, q, w, dt, n) for w, S0, n in grids)
+            whittle_loglik(S0, fit, q, w, dt, n) for w, S0, n in grids)
 
     start = np.array([math.log(fit_params[k]) for k in names])
     best = total(start)
     if not names:
         return max(best, 0.0)
-    fun, _ = _nelder_mead(total, start, best, refit_noise)
+    fun, _ = nelder_mead(total, start, best, refit_noise)
     return float(max(min(fun, best), 0.0))
 
 
@@ -395,7 +395,7 @@ def simulate_protocol(model: Model, params: Mapping[str, float], pc: PowerCycle,
     (its Markov state stationary, the same warm-up), its turn-on bias μ + u_r with
     u_r ~ N(0, σ_b²), the trend's level at its switch-on added, its times on the clock of
     the first switch-on."""
-    from .simulate import simulate
+    from ..simulation import simulate
 
     out = []
     c = float(params.get("trend.c", 0.0)) if "trend.c" in model.param_names else 0.0
@@ -412,7 +412,7 @@ def verify_protocol(r: Rivals, pc: PowerCycle, n: int, *, seed: int = 1,
     both fitted by the joint ML with the protocol's model (:meth:`PowerCycle.fit_options`,
     each search started at its own parameters): how often the right model wins by LR
     (> 0) and by BIC (LR > Δp ln N), and the realized mean LR."""
-    from .multirun import joint_ml
+    from ..ml.joint import joint_ml
 
     n_obs = sum(len(t) for t, _ in pc.runs)
     out: dict[str, Any] = {"runs": n, "switch_ons": pc.k, "run_hours": list(pc.hours),
@@ -428,8 +428,8 @@ def verify_protocol(r: Rivals, pc: PowerCycle, n: int, *, seed: int = 1,
         for _ in range(n):
             ss = simulate_protocol(mt, pt, pc, rng)
             try:
-                lt = joint_ml(ss, mt, start=pt, **pc.fit_options(mt), **_VERIFY_FIT).loglik
-                lo = joint_ml(ss, mo, start=po, **pc.fit_options(mo), **_VERIFY_FIT).loglik
+                lt = joint_ml(ss, mt, start=pt, **pc.fit_options(mt), **VERIFY_FIT).loglik
+                lo = joint_ml(ss, mo, start=po, **pc.fit_options(mo), **VERIFY_FIT).loglik
             except GyrostandError as exc:
                 log.warning("verify: a fit failed: %s", exc)
                 failed += 1
@@ -437,5 +437,5 @@ def verify_protocol(r: Rivals, pc: PowerCycle, n: int, *, seed: int = 1,
                 lrs.append(2.0 * (lt - lo))
             if progress is not None:
                 progress(1)
-        out[truth] = {**_wins(other, lrs, failed, penalty), "bic_threshold": penalty}
+        out[truth] = {**tally_wins(other, lrs, failed, penalty), "bic_threshold": penalty}
     return out

@@ -3,7 +3,7 @@ every term, built-in or plugin.
 
 Each term is one class: its parameters, role, regressors (batch and causal), prior scale,
 diagnostic signature, null hypothesis, look-alikes and summary bit (the facts are
-described in :class:`~gyrostand.core.term_base.Term`). A user's term registers with
+described in :class:`~gyrostand.core.terms.base.Term`). A user's term registers with
 :func:`register` (:mod:`gyrostand.plugins` finds them).
 """
 
@@ -14,9 +14,9 @@ import re
 
 import numpy as np
 
-from ..errors import ModelError
-from .names import VOCABULARY as VOCABULARY  # re-exported; defined in names.py
-from .term_base import (
+from ...errors import ModelError
+from ..names import VOCABULARY as VOCABULARY  # re-exported; defined in names.py
+from .base import (
     HYSTERESIS_RATE,
     NULLS,
     POSITIVE_KINDS,

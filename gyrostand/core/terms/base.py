@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
 
-from ..errors import ModelError
-from .kalman import first_order_response, foh_weights
+from ...errors import ModelError
+from ..kalman import first_order_response, foh_weights
 
 P = Mapping[str, float]
 
@@ -75,12 +75,22 @@ POSITIVE_KINDS = ("rate", "time", "width")
 
 @dataclass(frozen=True)
 class Context:
-    """What terms need from the data: times ``t`` (s), temperature ``temp`` (degC), ``dt``."""
+    """What terms need from the data: times ``t`` (s), temperature ``temp`` (degC), ``dt``,
+    and the model's own ``modifier`` terms (:meth:`effective_temp`; ``None``: built without
+    a model, see :func:`~gyrostand.core.model.context`)."""
 
     t: np.ndarray
     temp: np.ndarray
     dt: float
+    modifiers: tuple[Term, ...] | None = field(default=None, compare=False, repr=False)
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def bound(self, modifiers: tuple[Term, ...]) -> Context:
+        """This context for a model whose modifier terms are ``modifiers`` (the data and
+        what was computed from them shared)."""
+        if self.modifiers == modifiers:
+            return self
+        return replace(self, modifiers=modifiers, _cache=self._cache)
 
     def through_markov(self, u: np.ndarray, beta: float) -> np.ndarray:
         """Response of dx/dt = -beta x + u(t) to the input ``u`` (linear between samples).
@@ -93,16 +103,16 @@ class Context:
                                     float(u[0]) / beta)
 
     def effective_temp(self, p: P) -> np.ndarray:
-        """The temperature that drives the drift: T, changed by every ``modifier`` term
-        whose parameters ``p`` holds (:meth:`Term.modify_temperature`; ``temp_lag``: T
-        lagged by τ)."""
-        from .terms import TERMS  # the registry (terms.py builds on this module)
-
+        """The temperature that drives the drift: T, changed by each of the model's
+        ``modifier`` terms whose parameters ``p`` holds (:meth:`Term.modify_temperature`;
+        ``temp_lag``: T lagged by τ)."""
+        if self.modifiers is None:
+            raise ModelError("a term's input needs the model's context: this one was built "
+                             "without a model (context(samples, model))")
         T = self.temp
-        for cls in TERMS.values():
-            if cls.role == "modifier" and cls.params and all(
-                    f"{cls.name}.{q.name}" in p for q in cls.params):
-                T = cls().modify_temperature(p, self, T)
+        for term in self.modifiers:
+            if term.params and all(term.key(q.name) in p for q in term.params):
+                T = term.modify_temperature(p, self, T)
         return T
 
     @property
@@ -222,9 +232,9 @@ class Term:
     deterministic signature for the residual cross-correlation; empty: it has one),
     ``signature_needs`` (parameters of the fitted model its signature uses),
     ``constant`` (its regressor is identically 1: the converging LKF enters it as an input
-    of the drift, see :mod:`gyrostand.core.lkf_relin`), ``per_run`` (its parameters
+    of the drift, see :mod:`gyrostand.core.lkf.relin`), ``per_run`` (its parameters
     belong to one switch-on, not to the gyro: a joint fit of several runs,
-    :mod:`gyrostand.core.multirun`, gives each run its own).
+    :mod:`gyrostand.core.ml.joint`, gives each run its own).
     """
 
     name: ClassVar[str]

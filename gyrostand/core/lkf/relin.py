@@ -1,6 +1,6 @@
 """The paper's LKF made to converge: error-state feedback and periodic re-linearisation.
 
-Same filter as :mod:`gyrostand.core.lkf` (state ``[δε, δβ, δθ_in, δθ_out, other
+Same filter as :mod:`gyrostand.core.lkf.filter` (state ``[δε, δβ, δθ_in, δθ_out, other
 processes]``, moving point ε₀(t), Algorithm 2 of MODEL.md), with three changes that make it
 reach the exact-likelihood accuracy (measured by ``benchmarks/lkf_accuracy.py``):
 
@@ -11,7 +11,7 @@ reach the exact-likelihood accuracy (measured by ``benchmarks/lkf_accuracy.py``)
    coefficient) is moved to the current estimate and the stored history is filtered again
    at that point, repeatedly, until the estimate equals its point (a fixed point
    θ = g(θ)); each pass is one compiled loop over the record
-   (:func:`~gyrostand.core.lkf_kernel.lkf_pass`).
+   (:func:`~gyrostand.core.lkf.kernel.lkf_pass`).
 3. **Noise levels re-estimated.** Before the passes, the held noise levels that the caller
    did not fix are re-estimated at the current point by a 1-D likelihood search: the
    common scale concentrated out (``s² = Σ e²/f̃ / n``) and the ratio σ_v/σ searched
@@ -33,17 +33,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ModelError
-from .kalman import foh_weights
-from .lkf import _fixed_point
-from .lkf_kernel import lkf_pass
-from .lkf_noise import BOUND_STEP as BOUND_STEP  # re-exported (moved to lkf_noise)
-from .lkf_noise import NOISE_STEP as NOISE_STEP
-from .lkf_noise import RATIO_BOUNDS as RATIO_BOUNDS
-from .lkf_noise import inflation, reestimate
-from .lkf_online import ONLINE_RATE_WINDOW, causal_rate, default_prior_std, lkf_terms
-from .model import Model
-from .term_base import Bin, Context, Scales, Term
+from ...errors import ModelError
+from ..kalman import foh_weights
+from ..model import Model
+from ..terms.base import Bin, Context, Scales, Term
+from .kernel import lkf_pass
+from .noise import BOUND_STEP as BOUND_STEP  # re-exported (moved to lkf_noise)
+from .noise import NOISE_STEP as NOISE_STEP
+from .noise import RATIO_BOUNDS as RATIO_BOUNDS
+from .noise import inflation, reestimate
+from .online import ONLINE_RATE_WINDOW, causal_rate, default_prior_std, lkf_terms
+from .squarem import fixed_point
 
 log = logging.getLogger(__name__)
 
@@ -256,7 +256,7 @@ class RelinLKF:
 
     def _causal_regressors(self, T: float) -> np.ndarray:
         """Output regressors at the newest bin from past bins only (online): each term's
-        :meth:`~gyrostand.core.term_base.Term.causal_regressors`."""
+        :meth:`~gyrostand.core.terms.base.Term.causal_regressors`."""
         now = Bin((self.n - 1) * self.dt, T, self._causal_rate, self._bin_memory, self.dt)
         vals: dict[str, float] = {}
         for key, term in self.output_terms:
@@ -269,7 +269,8 @@ class RelinLKF:
 
     def _context(self) -> Context:
         n = self.n
-        return Context(t=self.dt * np.arange(n), temp=self._T[:n].copy(), dt=self.dt)
+        return Context(t=self.dt * np.arange(n), temp=self._T[:n].copy(), dt=self.dt,
+                       modifiers=self.model.modifiers)
 
     def _U(self) -> np.ndarray:
         return self._Uin[: self.n]
@@ -339,7 +340,7 @@ class RelinLKF:
         limit = self.max_passes if max_passes is None else max_passes
         x0 = self.point.copy()
         x1, sd, _ = g(x0)
-        x0, _, _, _, settled = _fixed_point(g, lambda: state["passes"], x0, x1, sd, None,
+        x0, _, _, _, settled = fixed_point(g, lambda: state["passes"], x0, x1, sd, None,
                                             limit, 0.0, [0], self.beta_max,
                                             settle_sigma=settle_sigma)
         passes = state["passes"]

@@ -7,13 +7,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .data import Samples
-from .model import Model
-from .term_base import POSITIVE_KINDS
+from ..data import Samples
+from ..model import Model
+from ..terms.base import POSITIVE_KINDS
 
 if TYPE_CHECKING:
-    from .ml import _Problem
-    from .multirun import _JointProblem
+    from .fit import Problem
+    from .joint_problem import JointProblem
 
 
 def hessian(fun, x: np.ndarray, h: np.ndarray, evaluate=None) -> np.ndarray:
@@ -77,7 +77,7 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
 
 
 def observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
-                         gls_info: np.ndarray, prob: _Problem | _JointProblem,
+                         gls_info: np.ndarray, prob: Problem | JointProblem,
                          at_bound: list[str],
                          passes: int = 2, evaluate=None):
     """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).

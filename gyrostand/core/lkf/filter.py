@@ -19,9 +19,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..errors import GyrostandError, ModelError
-from .data import Samples
-from .lkf_online import (
+from ...errors import GyrostandError, ModelError
+from ..data import Samples
+from ..model import Model, context
+from ..names import LKF_VARIANTS
+from ..results import Estimate, FitResult
+from ..validate import prepare, require_samples
+from .online import (
     ONLINE_RATE_WINDOW,
     PAPER_POINT,
     LkfTerms,
@@ -33,10 +37,7 @@ from .lkf_online import (
     lkf_layout,
     lkf_terms,
 )
-from .model import Model, context
-from .names import LKF_VARIANTS
-from .results import Estimate, FitResult
-from .validate import prepare, require_samples
+from .squarem import fixed_point
 
 __all__ = ["lkf", "OnlineLKF", "LkfTerms", "lkf_terms", "lkf_layout", "held_names",
            "held_values", "estimated_names", "default_prior_std", "causal_rate",
@@ -58,14 +59,14 @@ def held_values(samples: Samples, model: Model, given: Mapping[str, float]) -> t
         return {n: float(given[n]) for n in held_names(model)}, "given"
     r = None
     if model.is_single_process:
-        from .lsq import lsq
+        from ..lsq.fit import lsq
 
         try:
             r, src = lsq(samples, model), "lsq"
         except GyrostandError as exc:
             log.info("lkf: no lsq noise estimate (%s); using ml", exc)
     if r is None:
-        from .ml import ml
+        from ..ml.fit import ml
 
         r = ml(samples, model, fixed={k: v for k, v in given.items() if k in model.param_names},
                std_errors=False)
@@ -134,7 +135,7 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
     state = {"passes": 0}
 
     # the output terms' regressors as ML sees them (centred dT/dt, time from the start)
-    ctx = context(samples)
+    ctx = context(samples, model)
     regs = {k: term.regressors(hv, ctx)[k] for k, term in lkf_terms(model).outputs}
 
     def one_pass(pt: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -155,7 +156,7 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
     settled = not iterate
     clipped = [0]  # passes whose beta came out <= 0 and was re-linearised at beta0/3
     if iterate:
-        x0, x1, sd, run, settled = _fixed_point(one_pass, lambda: state["passes"], x0, x1,
+        x0, x1, sd, run, settled = fixed_point(one_pass, lambda: state["passes"], x0, x1,
                                                 sd, run, max_iter, tol, clipped,
                                                 BETA_MAX_DT / samples.dt)
         if not settled:
@@ -205,53 +206,6 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
     )
 
 
-def _fixed_point(g, count, x0, x1, sd, run, max_iter, tol, clipped, beta_max,
-                 settle_sigma=1e-3):
-    """Re-linearise until the estimate equals the linearisation point: x = g(x).
-
-    Plain re-linearisation converges linearly (slowly along the γ/β ridge); every step is
-    accelerated with SQUAREM (Varadhan & Roland 2008), falling back to the plain step when
-    the extrapolation would make β non-positive. Settled when every parameter moves by less
-    than ``tol`` (relative) or ``settle_sigma`` of its std. Returns the last point and its
-    pass (the last call of ``g`` is at the returned point).
-    """
-
-    def fix_beta(x_new, x_old):
-        x_new = x_new.copy()
-        if x_new[0] <= 0:  # typical of the first passes from the paper's 1e-4 point
-            clipped[0] += 1
-            x_new[0] = x_old[0] / 3
-        x_new[0] = min(max(x_new[0], x_old[0] / 10), x_old[0] * 10, beta_max)
-        return x_new
-
-    def small(a, b, s):
-        d = np.abs(a - b)
-        return bool(np.all((d <= tol * np.abs(b)) | (d <= settle_sigma * s)))
-
-    x1 = fix_beta(x1, x0)
-    while True:
-        if small(x1, x0, sd):
-            return x0, x1, sd, run, True
-        x2, sd2, run2 = g(x1)
-        x2 = fix_beta(x2, x1)
-        r, v = x1 - x0, x2 - 2 * x1 + x0
-        scale = np.where(sd2 > 0, sd2, 1.0)
-        nr, nv = np.linalg.norm(r / scale), np.linalg.norm(v / scale)
-        alpha = -nr / nv if nv > 0 else -1.0
-        alpha = min(alpha, -1.0)
-        xa = x0 - 2 * alpha * r + alpha * alpha * v
-        while xa[0] <= 0 and alpha < -1.0:
-            alpha = (alpha - 1.0) / 2
-            xa = x0 - 2 * alpha * r + alpha * alpha * v
-        if xa[0] <= 0:
-            xa = x2
-        x0 = xa
-        x1, sd, run = g(x0)
-        x1 = fix_beta(x1, x0)
-        if count() >= max_iter:
-            return x0, x1, sd, run, small(x1, x0, sd)
-
-
 def _run(f: OnlineLKF, samples: Samples, regs: Mapping[str, np.ndarray]) -> dict:
     N = len(samples)
     e = np.empty(N)
@@ -274,7 +228,7 @@ def _run(f: OnlineLKF, samples: Samples, regs: Mapping[str, np.ndarray]) -> dict
 def _lkf_relin(samples: Samples, model: Model, beta0, gamma0, b0, sigma, held, max_iter,
                prior_std, soaked) -> FitResult:
     """The relin variant over a record (see :func:`lkf`)."""
-    from .lkf_relin import RelinLKF
+    from .relin import RelinLKF
 
     lkf_layout(model)
     given = dict(held or {})
@@ -325,7 +279,7 @@ def _start_fit(samples: Samples, model: Model, given: Mapping[str, float]) -> Fi
     """Start point of the relin batch: least squares, or ML where LSQ cannot represent the
     model or finds no mean reversion."""
     if model.is_single_process:
-        from .lsq import lsq
+        from ..lsq.fit import lsq
 
         try:
             r = lsq(samples, model)
@@ -333,7 +287,7 @@ def _start_fit(samples: Samples, model: Model, given: Mapping[str, float]) -> Fi
                 return r
         except GyrostandError as exc:
             log.info("lkf: no lsq start (%s); using ml", exc)
-    from .ml import ml
+    from ..ml.fit import ml
 
     return ml(samples, model, fixed={k: v for k, v in given.items() if k in model.param_names},
               std_errors=False)
@@ -343,7 +297,7 @@ def _relin_regressors(samples: Samples, model: Model, hv: Mapping[str, float], f
     """The output terms' regressors as ML sees them (centred dT/dt), rows of the samples."""
     if not f.outputs:
         return None
-    ctx = context(samples)
+    ctx = context(samples, model)
     cols = {}
     for k, term in f.output_terms:
         if k not in cols:
@@ -353,7 +307,7 @@ def _relin_regressors(samples: Samples, model: Model, hv: Mapping[str, float], f
 
 def relin_fit(f, samples: Samples, warnings: list[str], info: Mapping, first: int = 0,
               method: str = "lkf") -> FitResult:
-    """A :class:`FitResult` of a :class:`~gyrostand.core.lkf_relin.RelinLKF`'s current
+    """A :class:`FitResult` of a :class:`~gyrostand.core.lkf.relin.RelinLKF`'s current
     state; its bins are those of ``samples`` from ``first`` on (innovations aligned)."""
     est = f.estimates
     if est["markov.beta"][0] <= 0:

@@ -33,16 +33,16 @@ import numpy as np
 from scipy.optimize import minimize
 from threadpoolctl import threadpool_limits
 
-from ..errors import IdentificationError, ModelError
-from .data import Samples
-from .kalman import kf_run
-from .ml_cov import covariance_from_hessian as covariance_from_hessian  # re-exported
-from .ml_cov import hessian as hessian
-from .ml_cov import observed_covariance
-from .model import LOG_2PI, Model, context
-from .results import Estimate, FitResult
-from .term_base import POSITIVE_KINDS
-from .validate import prepare, require_samples
+from ...errors import IdentificationError, ModelError
+from ..data import Samples
+from ..kalman import kf_run
+from ..model import LOG_2PI, Model, context
+from ..results import Estimate, FitResult
+from ..terms.base import POSITIVE_KINDS
+from ..validate import prepare, require_samples
+from .cov import covariance_from_hessian as covariance_from_hessian  # re-exported
+from .cov import hessian as hessian
+from .cov import observed_covariance
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ def concentrated_loglik(S: float, n: int, slogf: float, concentrate: bool
     return float(-0.5 * (n * LOG_2PI + slogf + S)), 1.0
 
 
-class _Problem:
+class Problem:
     """The concentrated likelihood of one model on one data set."""
 
     def __init__(self, model: Model, samples: Samples, fixed: Mapping[str, float]):
@@ -123,7 +123,7 @@ class _Problem:
         unknown = [k for k in self.fixed if k not in model.param_names]
         if unknown:
             raise ModelError(f"cannot fix {', '.join(unknown)}: not a parameter of {model}")
-        self.ctx = context(samples)
+        self.ctx = context(samples, model)
         self.weights = samples.noise_weights
         self.linear = model.names_of_kind("linear")
         self.lin_free = [n for n in self.linear if n not in self.fixed]
@@ -247,9 +247,9 @@ class _Problem:
         return p, A / s2, ll
 
 
-def _start_grid(prob: _Problem, seeds: Mapping[str, float | None]) -> list[np.ndarray]:
+def start_grid(prob: Problem, seeds: Mapping[str, float | None]) -> list[np.ndarray]:
     """Candidate start points: each term's start values of its searched parameters
-    (:meth:`~gyrostand.core.term_base.Term.start_values`; noise levels as ratios), and
+    (:meth:`~gyrostand.core.terms.base.Term.start_values`; noise levels as ratios), and
     around each seed value (least squares' β) a factor 3 either way."""
     axes = []
     dur, dt = prob.duration, prob.samples.dt
@@ -273,9 +273,9 @@ def _start_grid(prob: _Problem, seeds: Mapping[str, float | None]) -> list[np.nd
     return [np.clip(p, lo + 1e-9, hi - 1e-9) for p in pts]
 
 
-def _lsq_beta(samples: Samples, model: Model) -> float | None:
+def lsq_beta(samples: Samples, model: Model) -> float | None:
     """β from least squares on the part of the model it represents (a start value)."""
-    from .lsq import SUPPORTED, lsq
+    from ..lsq.fit import SUPPORTED, lsq
 
     if "markov" not in model:
         return None
@@ -301,7 +301,7 @@ def _newton_gain(res, n: int) -> float:
     return float(0.5 * abs(g @ step) * n)
 
 
-def _starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
+def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
                  ) -> list[np.ndarray]:
     """Start points from a previous fit's natural values ``start`` (by searched name), and
     a scan of each searched rate or time the previous fit lacks."""
@@ -335,12 +335,12 @@ def _sequential(fun: Callable[[np.ndarray], float],
     return [fun(z) for z in points]
 
 
-def _optimise(prob, starts: list[np.ndarray], n_local: int | None,
+def optimise(prob, starts: list[np.ndarray], n_local: int | None,
               evaluate: Callable[[Callable[[np.ndarray], float], Sequence[np.ndarray]],
                                  list[float]] = _sequential
               ) -> tuple[np.ndarray, dict[str, Any], list[str]]:
-    """Maximise the concentrated ln L of ``prob`` (a :class:`_Problem`, or the joint
-    problem of several runs, :mod:`~gyrostand.core.multirun`) by L-BFGS-B from the best of
+    """Maximise the concentrated ln L of ``prob`` (a :class:`Problem`, or the joint
+    problem of several runs, :mod:`~gyrostand.core.ml.joint`) by L-BFGS-B from the best of
     ``starts``: the searched point ``z``, the search's info and its warnings. ``evaluate``
     gives the objective at several points (the start grid, a gradient's points): an
     :class:`_Evaluator`'s thread pool, or one after the other."""
@@ -454,15 +454,15 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     if sigma is not None:
         fixed["markov.sigma"] = float(sigma)
     samples = prepare(samples, "ml")
-    prob = _Problem(model, samples, fixed)
+    prob = Problem(model, samples, fixed)
     n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
     require_samples(samples, samples.n_observed, n_free + 2, "ml")
     warnings = list(samples.warnings)
 
-    starts = _start_grid(prob, {"markov.beta": _lsq_beta(samples, model)})
+    starts = start_grid(prob, {"markov.beta": lsq_beta(samples, model)})
     if start:
-        starts += _starts_from(prob, starts, start)
-    z, info, more = _optimise(prob, starts, n_local, evaluate)
+        starts += starts_from(prob, starts, start)
+    z, info, more = optimise(prob, starts, n_local, evaluate)
     warnings += more
     at_bound = info.get("at_bound", [])
     p, gls_info, ll_prof = prob.natural(z)
