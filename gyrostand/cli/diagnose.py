@@ -9,8 +9,8 @@ from .common import add_format_args, emit
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
-    from ..core.diagnose.candidates import Report
     from ..core.diagnose.prederror import ModelError
+    from ..core.diagnose.results import Report
 
 
 def add_parser(sub: Any) -> None:

@@ -29,7 +29,7 @@ from .lazy import exports
 if TYPE_CHECKING:
     from .data import Samples
     from .design.fisher import crlb
-    from .diagnose.candidates import Report
+    from .diagnose.results import Report
     from .lkf.filter import OnlineLKF
     from .lsq.fit import OnlineLSQ
     from .model import Model
@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 
 #: each public name and the submodule that defines it
 EXPORTS: dict[str, str] = {
-    "Report": "diagnose.candidates", "Samples": "data", "crlb": "design.fisher",
+    "Report": "diagnose.results", "Samples": "data", "crlb": "design.fisher",
     "REGISTRY": "registry", "identify": "registry", "OnlineLKF": "lkf.filter",
     "OnlineLSQ": "lsq.fit", "Model": "model", "TemperatureProfile": "profiles",
     "chamber_profile": "profiles", "paper_profile": "profiles", "Estimate": "results",

@@ -36,6 +36,51 @@ def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
             P[j, i] = s
 
 
+@njit(cache=True, nogil=True, inline="always")
+def innovation(x, P, H, z, r, PH):  # pragma: no cover - compiled
+    """The innovation of a scalar measurement ``z`` and its variance; fills ``PH``.
+
+    PH = P H' ;  e = z − H x ;  f = H P H' + r
+    """
+    n = x.shape[0]
+    hx = 0.0
+    f = r
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += P[i, j] * H[j]
+        PH[i] = s
+        hx += H[i] * x[i]
+    for i in range(n):
+        f += H[i] * PH[i]
+    return z - hx, f
+
+
+@njit(cache=True, nogil=True, inline="always")
+def joseph_update(x, P, H, e, f, r, PH, K, B, BH):  # pragma: no cover - compiled
+    """The measurement update after :func:`innovation`, in place (Joseph form).
+
+    K = P H' / f ;  x = x + K e ;  P = (I − K H) P (I − K H)' + K r K'
+
+    ``K`` (n,), ``B`` (n, n) and ``BH`` (n,) are work arrays (``BH`` may be ``PH``: it is
+    written once ``PH`` is used up): B = (I − K H) P = P − K (H P), H P = PH' since P is
+    symmetric, and BH = B H'.
+    """
+    n = x.shape[0]
+    for i in range(n):
+        K[i] = PH[i] / f
+        x[i] += K[i] * e
+    for i in range(n):
+        for j in range(n):
+            B[i, j] = P[i, j] - K[i] * PH[j]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += B[i, j] * H[j]
+        BH[i] = s
+    joseph_finish(P, B, BH, K, r)
+
+
 @njit(cache=True, nogil=True)
 def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     """Filter every column of ``Y`` (shape (N, m)) with the same gains.
@@ -274,32 +319,8 @@ def kf_step(x, P, A, Qd, H, r, z):  # pragma: no cover - compiled
     if np.isnan(z):
         return np.nan, np.nan
     PH = np.zeros(n)
-    hx = 0.0
-    f = r
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            s += P[i, j] * H[j]
-        PH[i] = s
-        hx += H[i] * x[i]
-    for i in range(n):
-        f += H[i] * PH[i]
-    e = z - hx
-    K = PH / f
-    for i in range(n):
-        x[i] += K[i] * e
-    # (I - K H) P = P - K (H P), H P = PH' since P is symmetric
-    B = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            B[i, j] = P[i, j] - K[i] * PH[j]
-    BH = np.zeros(n)
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            s += B[i, j] * H[j]
-        BH[i] = s
-    joseph_finish(P, B, BH, K, r)
+    e, f = innovation(x, P, H, z, r, PH)
+    joseph_update(x, P, H, e, f, r, PH, np.empty(n), np.empty((n, n)), np.zeros(n))
     return e, f
 
 

@@ -26,7 +26,7 @@ from . import text as _text
 from .views import AllanView, DiagnosisView, FitStepView, Plot, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
-    from ..core.diagnose.candidates import Report
+    from ..core.diagnose.results import Report
     from ..session.final import GyroFinal
 
 __all__ = ["RENDERER", "page", "table", "figure", "e", "num"]

@@ -18,8 +18,8 @@ from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport,
 
 if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
-    from ..core.diagnose.candidates import Report
     from ..core.diagnose.prederror import ModelError
+    from ..core.diagnose.results import Report
     from ..session.final import GyroFinal
 
 __all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step", "allan",

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
-    from ..core.diagnose.candidates import Report
+    from ..core.diagnose.results import Report
     from ..core.results import FitResult
     from ..session.final import GyroFinal
     from ..session.pipeline import RunOutcome

@@ -14,8 +14,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..core.data import Samples
-from ..core.diagnose.candidates import Report
 from ..core.diagnose.diagnostics import allan_deviation
+from ..core.diagnose.results import Report
 from ..core.results import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 

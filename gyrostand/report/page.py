@@ -31,7 +31,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .. import __version__, progress
-from ..core.diagnose.candidates import Report
+from ..core.diagnose.results import Report
 from ..core.model import context
 from ..render import render
 from ..render.views import AllanView, Plot, ReportPage

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from ..core.data import Samples
-from ..core.diagnose.candidates import Report, fit_error
+from ..core.diagnose.candidates import fit_error
+from ..core.diagnose.results import Report
 from ..core.lkf.filter import estimated_names, held_names, lkf, lkf_layout
 from ..core.ml.fit import ml
 from ..errors import GyrostandError

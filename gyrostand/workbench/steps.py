@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 
 from ..core.design.separation import design_command
-from ..core.diagnose.candidates import Report, diagnose, fit_error
+from ..core.diagnose.candidates import diagnose, fit_error
 from ..core.diagnose.prederror import ModelError
+from ..core.diagnose.results import Report
 from ..core.ml.fit import ml
 from ..core.model import Model
 from ..core.results import DRIFT_UNIT, FitResult

@@ -16,17 +16,15 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.design.search import ChamberLimits, case_temperature, standard_cycle
-from gyrostand.core.design.separation import (
+from gyrostand.core.design.divergence import (
     _distance,
     _spectrum,
     divergence,
     mean_response,
-    rivals,
-    separate,
-    verify,
     whittle_loglik,
 )
+from gyrostand.core.design.search import ChamberLimits, case_temperature, standard_cycle
+from gyrostand.core.design.separation import rivals, separate, verify
 from gyrostand.core.model import Model, context
 from gyrostand.core.profiles import chamber_profile
 from gyrostand.core.simulation import simulate
@@ -245,7 +243,7 @@ def test_the_joint_distance_is_the_gls_distance_over_the_runs():
     """Two runs fitted by the warm-up model with a shared γ and each run's own bias and
     warm-up amplitude: the stacked Kalman-whitened least squares = the dense GLS with a
     block-diagonal covariance (the runs independent) and per-run columns."""
-    from gyrostand.core.design.separation import _joint_distance
+    from gyrostand.core.design.divergence import _joint_distance
 
     ma, mb = Model.parse("markov,temp,bias,trend"), Model.parse("markov,temp,bias,warmup")
     pa = {**BASE, "markov.beta": 0.02, "trend.c": 1e-4}
@@ -279,7 +277,7 @@ def test_k_alike_switch_ons_give_k_times_one_runs_expected_lr():
     joint refit's optimum is every run's own (the sum of k equal functions), so Λ is k ×
     one run's — with the warm-up's τ refitted per run, and the trend shared (measured:
     0.385 and 1.16 from the warm-up)."""
-    from gyrostand.core.design.separation import divergence_runs
+    from gyrostand.core.design.divergence import divergence_runs
 
     lim = ChamberLimits(0, 50, 1 / 60, 300, 1800, legs=3)
     case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
@@ -300,7 +298,8 @@ def test_trend_and_warmup_are_time_only_and_a_split_budget_is_measured():
     switch-ons gives each split's Λ (measured at 2 h: both directions fall with the split,
     the per-run bias absorbing each restart's level), and the joint verify of a split design
     on data from a short warm-up picks the warm-up every time."""
-    from gyrostand.core.design.separation import Rivals, divergence_runs, time_only
+    from gyrostand.core.design.divergence import divergence_runs
+    from gyrostand.core.design.separation import Rivals, time_only
     from gyrostand.core.design.switch_ons import separate_switch_ons, switch_on_records
 
     lim = ChamberLimits(0, 50, 1 / 60, 600, 2 * 3600, legs=6)

@@ -8,8 +8,9 @@ from __future__ import annotations
 import pytest
 
 from gyrostand.core.chisq import sup_chi2_sf
-from gyrostand.core.diagnose.candidates import TEST_SUP, rank_candidates
+from gyrostand.core.diagnose.candidates import rank_candidates
 from gyrostand.core.diagnose.joint import JointDiagnosis
+from gyrostand.core.diagnose.results import TEST_SUP
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.ml.joint import joint_ml
 from gyrostand.render.text import RENDERER

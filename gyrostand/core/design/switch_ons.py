@@ -35,13 +35,10 @@ import numpy as np
 from ...errors import GyrostandError, ModelError
 from ..data import Samples
 from ..model import Model, context
-from .search import ChamberLimits, case_temperature, standard_cycle
-from .separation import (
+from .divergence import (
     VERIFY_FIT,
-    Rivals,
     design_samples,
     divergence_runs,
-    expected_lr,
     log_bounds,
     mean_response,
     nelder_mead,
@@ -50,6 +47,8 @@ from .separation import (
     whittle_grids,
     whittle_loglik,
 )
+from .search import ChamberLimits, case_temperature, standard_cycle
+from .separation import Rivals, expected_lr
 
 log = logging.getLogger(__name__)
 

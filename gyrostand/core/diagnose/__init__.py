@@ -10,7 +10,7 @@ from ..lazy import exports
 #: each public name and the submodule defining it
 EXPORTS: dict[str, str] = {
     "diagnose": "candidates",
-    "Report": "candidates",
+    "Report": "results",
     "rank_candidates": "candidates",
     "diagnose_fit": "diagnostics",
     "Diagnosis": "diagnostics",

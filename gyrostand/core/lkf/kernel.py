@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kalman import joseph_finish
+from ..kalman import innovation, joseph_update
 
 
 @njit(cache=True, nogil=True)
@@ -120,17 +120,7 @@ def lkf_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback,
         for j in range(n_out):
             z -= th_out[j] * X[k, j]
             H[o_out + j] = X[k, j]
-        hx = 0.0
-        f = r
-        for i in range(n):
-            s = 0.0
-            for j in range(n):
-                s += P[i, j] * H[j]
-            PH[i] = s
-            hx += H[i] * x[i]
-        for i in range(n):
-            f += H[i] * PH[i]
-        e = z - hx
+        e, f = innovation(x, P, H, z, r, PH)
         E[k] = e
         F[k] = f
         if not f > 0.0:
@@ -139,19 +129,7 @@ def lkf_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback,
         s_nis += e * e / f
         s_logf += np.log(f)
         nobs += 1
-        for i in range(n):
-            K[i] = PH[i] / f
-            x[i] += K[i] * e
-        # Joseph form: P = (I − K H) P (I − K H)' + K r K'
-        for i in range(n):
-            for j in range(n):
-                AP[i, j] = P[i, j] - K[i] * PH[j]
-        for i in range(n):
-            s = 0.0
-            for j in range(n):
-                s += AP[i, j] * H[j]
-            PH[i] = s
-        joseph_finish(P, AP, PH, K, r)  # PH now holds (I − K H) P H'
+        joseph_update(x, P, H, e, f, r, PH, K, AP, PH)  # (AP, PH: work arrays)
     st[0] = eps0
     return s_nis, s_logf, nobs
 
