@@ -238,4 +238,4 @@ def test_a_plugin_term_named_like_a_built_in_is_refused(tmp_path):
     assert r.returncode == 2
     err = r.stderr
     assert "plugins[0]" in err and "my_bias.MyBias" in err  # the plugin ...
-    assert "built-in term 'bias'" in err and "gyrostand.core.terms.Bias" in err  # ... and it
+    assert "built-in term 'bias'" in err and "gyrostand.core.terms.builtin.Bias" in err  # ... and it

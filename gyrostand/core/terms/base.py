@@ -159,6 +159,14 @@ class Context:
 #: ``output`` effect added to the measurement, or a ``modifier`` of another term's input
 #: (a lag of the temperature)
 ROLES = ("process", "noise", "input", "output", "modifier")
+#: the hooks a term of each role must define (:meth:`Term.contract_gaps`)
+REQUIRED_HOOKS: Mapping[str, tuple[str, ...]] = {
+    "process": ("states",),
+    "noise": ("measurement_var",),
+    "input": ("input",),
+    "output": ("regressors",),
+    "modifier": ("modify_temperature",),
+}
 #: the null hypothesis of a candidate test of the term: an ``interior`` point (χ²(df)), on
 #: the ``boundary`` of the parameter space (a noise intensity 0: ½χ²(0) + ½χ²(df), Self &
 #: Liang 1987), or with a ``nuisance`` parameter not identified under it (a time constant
@@ -254,6 +262,51 @@ class Term:
     def key(self, short: str) -> str:
         return f"{self.name}.{short}"
 
+    # ---- the contract -------------------------------------------------------------------
+    @classmethod
+    def overrides(cls, hook: str) -> bool:
+        """Whether this term defines ``hook`` itself rather than inheriting :class:`Term`'s."""
+        return getattr(cls, hook) is not getattr(Term, hook)
+
+    @classmethod
+    def contract_gaps(cls) -> list[str]:
+        """What this term lacks of the contract of its role (empty: it keeps it).
+
+        Every term states ``name``, ``params`` (:class:`Param`), ``math``, a ``role`` of
+        :data:`ROLES` and a ``null`` of :data:`NULLS`, and defines the hooks
+        :data:`REQUIRED_HOOKS` names for its role; a process adds at least one state, an
+        input has one linear parameter; a term the online LKF can run
+        (:meth:`lkf_unsupported` empty) whose coefficient is not in the drift's unit
+        defines :meth:`prior_std` (the LKF's prior scale of that coefficient).
+        :func:`~gyrostand.core.terms.builtin.register` refuses a term with a gap, naming it.
+        """
+        gaps = []
+        if not isinstance(getattr(cls, "name", None), str):
+            gaps.append("name (a class attribute: the term's name in a model)")
+        if not isinstance(cls.params, tuple) or not all(isinstance(q, Param)
+                                                        for q in cls.params):
+            gaps.append("params (a tuple of Param)")
+            return gaps
+        if not cls.math:
+            gaps.append("math (its equation, for reports)")
+        if cls.role not in ROLES:
+            return gaps + [f"role (one of {', '.join(ROLES)}; got {cls.role!r})"]
+        if cls.null not in NULLS:
+            gaps.append(f"null (one of {', '.join(NULLS)}; got {cls.null!r})")
+        gaps += [f"{hook}() (every {cls.role} term defines it)"
+                 for hook in REQUIRED_HOOKS[cls.role] if not cls.overrides(hook)]
+        if cls.role == "process" and cls.n_states < 1:
+            gaps.append("n_states (a process adds at least one stochastic state)")
+        linear = [q for q in cls.params if q.kind == "linear"]
+        if cls.role == "input" and len(linear) != 1:
+            gaps.append("one linear parameter (an input term's coefficient θ of u(T))")
+        if not gaps and not cls.overrides("prior_std"):
+            odd = [f"{q.name} (unit {q.unit})" for q in linear if q.unit != "y"]
+            if odd and not cls().lkf_unsupported():
+                gaps.append(f"prior_std() (the online LKF's prior scale of {', '.join(odd)}, "
+                            "not in the drift's unit)")
+        return gaps
+
     @property
     def linear(self) -> tuple[str, ...]:
         """Full names of the parameters the model is linear in."""
@@ -300,10 +353,10 @@ class Term:
         if self.role == "modifier":
             return "it modifies another term's input through a time constant"
         if self.role == "input":
-            ok = type(self).input is not Term.input and len(self.linear) == 1
+            ok = self.overrides("input") and len(self.linear) == 1
             return "" if ok else "an input term needs one linear parameter and input()"
         if self.role == "output":
-            ok = type(self).causal_regressors is not Term.causal_regressors
+            ok = self.overrides("causal_regressors")
             return "" if ok else "it defines no causal regressor (causal_regressors)"
         if self.role == "process":
             return "" if self.n_states == 1 else "the LKF stacks one state per process"

@@ -383,7 +383,10 @@ def register(cls: type[Term], origin: str = "") -> type[Term]:
 
     Its summary bit is the next free one after the built-ins' unless it sets ``bit``.
     Registering the same class again is a no-op; a name or bit another term has is an
-    error naming both.
+    error naming both; a term that does not keep the contract of its role
+    (:meth:`~gyrostand.core.terms.base.Term.contract_gaps`: e.g. an output term without
+    ``regressors()``, an LKF-capable coefficient without ``prior_std()``) is an error
+    naming what it lacks.
     """
     where = origin or f"{cls.__module__}.{getattr(cls, '__qualname__', cls)}"
     if not (isinstance(cls, type) and issubclass(cls, Term)):
@@ -400,10 +403,10 @@ def register(cls: type[Term], origin: str = "") -> type[Term]:
         other = f"{old.__module__}.{old.__qualname__}"
         raise ModelError(f"plugin {where}: term name {name!r} clashes with {what} {name!r} "
                          f"({ORIGIN.get(name, other)})")
-    if cls.role not in ROLES:
-        raise ModelError(f"plugin {where}: role {cls.role!r} is not one of {', '.join(ROLES)}")
-    if cls.null not in NULLS:
-        raise ModelError(f"plugin {where}: null {cls.null!r} is not one of {', '.join(NULLS)}")
+    gaps = cls.contract_gaps()
+    if gaps:
+        raise ModelError(f"plugin {where}: term {name!r} (role {cls.role!r}) lacks what a "
+                         f"term must state: {'; '.join(gaps)}")
     for q in cls.params:
         if not isinstance(q, Param) or q.kind not in _KINDS or not _NAME_RE.match(q.name):
             raise ModelError(f"plugin {where}: parameter {q!r} must be a Param with a kind "

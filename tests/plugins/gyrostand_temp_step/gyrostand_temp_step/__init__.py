@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from gyrostand.core.terms.builtin import Param, Term
+from gyrostand.core.terms import Param, Term
 
 #: transition temperature (degC) and width of the step (degC)
 T_STEP = 40.0
