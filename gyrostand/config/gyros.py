@@ -70,7 +70,7 @@ class GyroSections:
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
         model = self.names(m["model"], f"{path}.model", self.terms)
-        self.model_of(model, f"{path}.model")
+        core_model = self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
                             IDENTIFIERS)
         # an identifier needing a term the model lacks (lkf linearises the markov state's
@@ -87,6 +87,19 @@ class GyroSections:
                         "identifies this gyro (at the end of the run)",
                         self.source, path, ", ".join(model), term, " and ".join(need))
             idents = tuple(i for i in idents if i not in need)
+        # every identifier left checks the model as it would at its first bin (the lsq of a
+        # model with temp_lag, the lkf of a term without a causal regressor): refused here,
+        # naming the term, not at every bin of the run
+        for ident in idents:
+            why = registry.get(ident).refusal(core_model)
+            if why is None:
+                continue
+            if "identifiers" in m:
+                raise self.fail(f"{path}.identifiers", f"{ident} cannot identify this model: "
+                                f"{why}")
+            log.warning("%s: %s: %s cannot identify the model (%s): %s; the others do",
+                        self.source, path, ident, ", ".join(model), why)
+            idents = tuple(i for i in idents if i != ident)
         result = None
         if m.get("result") is not None:
             r = self.mapping(m["result"], f"{path}.result", ("message",), ("summary",))
