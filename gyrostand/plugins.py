@@ -36,6 +36,19 @@ GROUP = "gyrostand.terms"
 _loaded_entry_points = False
 
 
+def available_terms() -> tuple[str, ...]:
+    """Every term a model may name here: the built-in vocabulary, then each installed
+    ``gyrostand.terms`` entry point by its name (the term's), without importing it, so a
+    command's ``--help`` lists the plugins without the cost of loading them. (A session
+    file's ``plugins:`` module is known only once its file is read.)"""
+    from importlib.metadata import entry_points
+
+    from .core.names import VOCABULARY
+
+    extra = sorted({ep.name for ep in entry_points(group=GROUP)} - set(VOCABULARY))
+    return (*VOCABULARY, *extra)
+
+
 def load_entry_points() -> list[str]:
     """Register the terms of every installed ``gyrostand.terms`` entry point (once per
     process; sorted by name, so their summary bits do not depend on install order).

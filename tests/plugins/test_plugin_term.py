@@ -201,6 +201,15 @@ def test_identify_with_a_plugin_term_from_a_csv(installed, tmp_path):
     assert r.returncode == 2 and "unknown model term 'temp_step'" in r.stderr
 
 
+def test_every_help_lists_the_installed_plugin_terms(installed):
+    """``--help`` of each command taking terms lists the plugin's by its entry point (not
+    imported for it); without the plugin installed, only the built-ins."""
+    for cmd in ("fit", "identify", "design", "allan", "batch"):
+        with_plugin = gyrostand(cmd, "--help", path=installed).stdout
+        assert "temp_step" in with_plugin and "hysteresis" in with_plugin, cmd
+        assert "temp_step" not in gyrostand(cmd, "--help", path=None).stdout, cmd
+
+
 def test_plugins_key_of_the_session_file(tmp_path):
     """The module on PYTHONPATH but not installed (no entry point): ``plugins:`` loads it."""
     mods = tmp_path / "mods"
