@@ -83,8 +83,10 @@ def edf_overlapping(n: int, m: np.ndarray, noise: np.ndarray | str) -> np.ndarra
     samples at averaging factors ``m`` for ``noise`` 'white', 'flicker' or 'random_walk'
     (per m, or one for all); formulas in the module docstring.
 
-    >>> [round(float(e), 1) for e in edf_overlapping(1000, np.array([1, 10, 100]), "white")]
-    [665.8, 146.2, 13.0]
+    Examples:
+            >>> [round(float(e), 1) for e in edf_overlapping(1000, np.array([1, 10, 100]),
+        ...                                              "white")]
+        [665.8, 146.2, 13.0]
     """
     m = np.asarray(m, dtype=float)
     kinds = np.broadcast_to(np.asarray(noise), m.shape)

@@ -98,7 +98,10 @@ def lkf(samples: Samples, model: Model, *, variant: str = "relin",
     ``variant="paper"``: the paper's single pass (or iterated with ``iterate=True``).
 
     Args:
-        beta0, gamma0, b0: linearisation point (paper variant default: the paper's 1e-4).
+        beta0: linearisation point of ``markov.beta`` (paper variant default: the
+            paper's 1e-4).
+        gamma0: linearisation point of ``temp.gamma`` (paper variant default: 1e-4).
+        b0: linearisation point of ``bias.b``.
         sigma: the known σ (``markov.sigma``), as in the paper; with ``held``, values
             given are fixed (never re-estimated).
         held: other held values (``white.sigma``, ``random_walk.q``, ...).

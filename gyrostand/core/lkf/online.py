@@ -114,7 +114,9 @@ class OnlineLKF:
         model: the model (``markov`` required; inputs, outputs and further processes as
             :func:`lkf_terms` accepts them).
         dt: sampling step, s.
-        beta0, gamma0, b0: linearisation point.
+        beta0: linearisation point of ``markov.beta`` (1/s).
+        gamma0: linearisation point of ``temp.gamma``.
+        b0: linearisation point of ``bias.b``.
         held: values of the held parameters (see :func:`held_names`), e.g.
             ``{"markov.sigma": 0.1, "white.sigma": 0.01}``.
         prior_std: prior std of each estimated parameter's correction and of the first
