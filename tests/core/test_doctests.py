@@ -20,7 +20,7 @@ CORE = ["gyrostand.core"] + [f"gyrostand.core.{m.name}"
 #: the modules whose docstrings carry runnable examples: each must run at least one
 WITH_EXAMPLES = ["gyrostand.core", "gyrostand.core.allan", "gyrostand.core.identify",
                  "gyrostand.core.model", "gyrostand.core.profiles", "gyrostand.core.results",
-                 "gyrostand.core.simulate"]
+                 "gyrostand.core.simulate", "gyrostand.core.summary"]
 
 
 def _run(name: str) -> doctest.TestResults:
