@@ -56,7 +56,7 @@ def _drift_unit(subject: Subject) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ..core.ml import ml
-    from ..render.views import AllanView
+    from ..report.views import AllanView
     from ..workbench import open_subject
 
     subject = open_subject(args.run, gyro=args.gyro, model=args.model)
@@ -67,9 +67,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def render(tables: list[AllanTable], gyro: str, dt: float) -> str:
-    """The tables as text (:func:`gyrostand.render.text.allan`)."""
-    from ..render.text import allan
-    from ..render.views import AllanView
+    """The tables as text (:func:`gyrostand.report.text.allan`)."""
+    from ..report.text import allan
+    from ..report.views import AllanView
 
     raw, resid = tables
     return allan(AllanView(gyro, "", raw.unit, dt, (), raw.level, raw, resid))

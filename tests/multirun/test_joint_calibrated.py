@@ -11,7 +11,7 @@ from gyrostand.core.candidates import TEST_SUP, rank_candidates
 from gyrostand.core.chisq import sup_chi2_sf
 from gyrostand.core.ml import ml
 from gyrostand.core.multirun import JointDiagnosis, joint_ml
-from gyrostand.render.text import RENDERER
+from gyrostand.report.text import RENDERER
 
 from .sets import run_set
 

@@ -22,9 +22,9 @@ from gyrostand.core.ml import ml
 from gyrostand.core.model import Model, context
 from gyrostand.core.profiles import chamber_profile
 from gyrostand.core.simulate import simulate
-from gyrostand.render.views import AllanView
 from gyrostand.report import figures, write_report
 from gyrostand.report.page import png_header_size
+from gyrostand.report.views import AllanView
 from gyrostand.workbench import open_subject, run_diagnose
 
 from .test_report import FIGURES, parse
