@@ -29,8 +29,10 @@ STATUS_SIGNALS = ("Page", "Counter", "State", "Bins", "Gaps", "FramesDecoded",
 COMMAND_SIGNALS = ("Command", "Sequence")
 ACK_SIGNALS = ("Command", "Sequence", "Result", "Reason")
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-_PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
+#: a session's and a gyro's name: a letter or digit, then letters, digits, ``_.-``
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+#: a parameter's name ``<term>.<param>``: groups (term, param)
+PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
 MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 1000.0
 #: bounds of sampling.dt (s): frames at up to 1000 Hz in bins of at least 10 ms, at most 1 h
 MIN_DT, MAX_DT = 0.01, 3600.0
@@ -188,19 +190,22 @@ class SessionConfig:
         raise KeyError(name)
 
 
-
-def _join(path: str, key: str) -> str:
+def key_path(path: str, key: str) -> str:
+    """The key path of ``key`` inside ``path`` (``"<top>"``: the file's top level), as
+    error messages name it: ``sampling.dt``."""
     return key if path == "<top>" else f"{path}.{key}"
 
 
-def _kind(value: Any) -> str:
+def kind_of(value: Any) -> str:
+    """What ``value`` is, as an error message says it was given: ``nothing``, a mapping
+    or list by its type, anything else by its type and (clipped) value."""
     if value is None:
         return "nothing"
-    return f"{type(value).__name__} {_clip(repr(value), 80)}" if not isinstance(
+    return f"{type(value).__name__} {clip(repr(value), 80)}" if not isinstance(
         value, (dict, list)) else type(value).__name__
 
 
-def _clip(text: str, n: int) -> str:
+def clip(text: str, n: int) -> str:
     """``text`` cut to ``n`` characters (an error message quotes input, never all of it)."""
     return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
 
