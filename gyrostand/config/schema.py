@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from gyrostand.can.dbc import MessageRef, SignalRef
+from gyrostand.can.framesim import FrameSimOptions
 from gyrostand.core import registry
 from gyrostand.core.names import VOCABULARY
 from gyrostand.core.registry import LkfOptions
@@ -139,25 +140,19 @@ class SimGyroConfig:
     params: Mapping[str, float]
 
 
-@dataclass(frozen=True)
-class SimulateConfig:
-    """Stand simulator: temperature breakpoints ``(t s, T degC)``, linear between; frame
-    rates (Hz); uniform timestamp jitter half-width (s); drop probability; sensor
-    quantization step (physical units, 0 = only the DBC's resolution); ``start`` absolute
-    timestamp of t = 0 (s since the Unix epoch: BLF stores absolute time)."""
+@dataclass(frozen=True, kw_only=True)
+class SimulateConfig(FrameSimOptions):
+    """Stand simulator: the frame simulator's options (its fields, owned by
+    :class:`~gyrostand.can.framesim.FrameSimOptions`: frame rates (Hz), uniform timestamp
+    jitter half-width (s), drop probability, sensor quantization steps (physical units,
+    0 = only the DBC's resolution), ``start`` absolute timestamp of t = 0 (s since the Unix
+    epoch: BLF stores absolute time), ``seed``, also of the truth) and the truth: the
+    temperature breakpoints ``(t s, T degC)``, linear between, each gyro's true model,
+    the ``duration`` (s; default the last breakpoint's time), ``realtime`` pacing."""
 
     temperature: tuple[tuple[float, float], ...]
     gyros: Mapping[str, SimGyroConfig]
-    seed: int = 0
-    start: float = 1_700_000_000.0
     duration: float | None = None
-    drift_rate: float = 100.0
-    temperature_rate: float = 10.0
-    interpolation: str = "hold"
-    jitter: float = 0.0
-    drop: float = 0.0
-    drift_quantization: float = 0.0
-    temperature_quantization: float = 0.0
     realtime: bool = False
 
 
