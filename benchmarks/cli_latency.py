@@ -179,9 +179,8 @@ import scipy.linalg
 mark("scipy.linalg (numba's BLAS check)")
 import scipy.optimize
 mark("scipy.optimize")
-from gyrostand.core import model as _model, registry as _registry
-from gyrostand.core.ml import fit as _ml
-from gyrostand.render import render
+from gyrostand.core import ml as _ml, model as _model, registry as _registry
+from gyrostand.report import render
 mark("gyrostand core modules")
 from gyrostand.core.data import Samples
 s = Samples.read_csv(sys.argv[1])

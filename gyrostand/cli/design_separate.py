@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .design import limits_of, program_document, program_lines, write_files
+from .design_program import limits_of, program_document, program_lines, write_files
 
 
 def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:

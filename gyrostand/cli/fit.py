@@ -27,7 +27,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render.views import FitStepView
+    from ..report.views import FitStepView
     from ..workbench import run_fit
 
     if len(args.run) > 1:
@@ -45,8 +45,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def render(step: FitStep) -> str:
-    """The step as text (:func:`gyrostand.render.text.fit_step`)."""
-    from ..render.text import fit_step
-    from ..render.views import FitStepView
+    """The step as text (:func:`gyrostand.report.text.fit_step`)."""
+    from ..report.text import fit_step
+    from ..report.views import FitStepView
 
     return fit_step(FitStepView(step))

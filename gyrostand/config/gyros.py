@@ -13,10 +13,10 @@ from gyrostand.core.names import LKF_VARIANTS
 from gyrostand.errors import CanEdgeError
 
 from .schema import (
-    _NAME_RE,
-    _PARAM_RE,
     IDENTIFIERS,
     MATCHES,
+    NAME_RE,
+    PARAM_RE,
     RESULT_SIGNALS,
     SUMMARY_SIGNALS,
     ChannelConfig,
@@ -65,7 +65,7 @@ class GyroSections:
         m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
                          ("identifiers", "result", "lkf"))
         name = self.string(m["name"], f"{path}.name")
-        if not _NAME_RE.match(name):
+        if not NAME_RE.match(name):
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
@@ -139,7 +139,7 @@ class GyroSections:
         names = self.model_of(model, path).param_names
         held: dict[str, float] = {}
         for k, v in held_raw.items():
-            mt = _PARAM_RE.match(str(k))
+            mt = PARAM_RE.match(str(k))
             if not mt or mt.group(1) not in model:
                 raise self.fail(f"{path}.held.{k}", "expected '<term>.<param>' of a term in "
                                                     "this gyro's model")

@@ -17,7 +17,6 @@ from gyrostand.runfolder.layout import DATA_FORMATS
 
 from .gyros import GyroSections
 from .schema import (
-    _NAME_RE,
     ACK_SIGNALS,
     COMMAND_SIGNALS,
     MATCHES,
@@ -26,15 +25,16 @@ from .schema import (
     MAX_GAP_BINS,
     MIN_DT,
     MODEL_TERMS,
+    NAME_RE,
     STATUS_SIGNALS,
     GyroConfig,
     ReconnectConfig,
     ResponsesConfig,
     SamplingConfig,
     SessionConfig,
-    _clip,
-    _join,
-    _kind,
+    clip,
+    key_path,
+    kind_of,
 )
 from .simulate import SimulateSection
 
@@ -50,7 +50,7 @@ def load_config(path: str | Path) -> SessionConfig:
     try:
         data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {_clip(str(exc), 600)}") from exc
+        raise ConfigError(f"{path}: invalid YAML: {clip(str(exc), 600)}") from exc
     return parse_config(data, source=path, base_dir=path.resolve().parent)
 
 
@@ -87,7 +87,7 @@ class _StrictLoader(yaml.SafeLoader):
         if self.check_event(yaml.AliasEvent):
             ev = self.peek_event()
             raise yaml.composer.ComposerError(
-                None, None, f"aliases (*{_clip(str(ev.anchor), 40)}) are not accepted in a "
+                None, None, f"aliases (*{clip(str(ev.anchor), 40)}) are not accepted in a "
                 "session file: write the value out", ev.start_mark)
         return super().compose_node(parent, index)
 
@@ -103,7 +103,7 @@ class _StrictLoader(yaml.SafeLoader):
             if dup:
                 raise yaml.constructor.ConstructorError(
                     "while constructing a mapping", node.start_mark,
-                    f"duplicate key {_clip(repr(key), 60)}", key_node.start_mark)
+                    f"duplicate key {clip(repr(key), 60)}", key_node.start_mark)
         return super().construct_mapping(node, deep)
 
 
@@ -128,26 +128,26 @@ class _Parser(GyroSections, SimulateSection):
 
     # -- helpers ---------------------------------------------------------------------
     def fail(self, path: str, msg: str) -> ConfigError:
-        return ConfigError(f"{self.source}: {_clip(path, 200)}: {_clip(msg, 600)}")
+        return ConfigError(f"{self.source}: {clip(path, 200)}: {clip(msg, 600)}")
 
     def mapping(self, value: Any, path: str, required: tuple[str, ...],
                 optional: tuple[str, ...]) -> dict[str, Any]:
         if not isinstance(value, Mapping):
-            raise self.fail(path, f"expected a mapping, got {_kind(value)}")
+            raise self.fail(path, f"expected a mapping, got {kind_of(value)}")
         unknown = [k for k in value if k not in required and k not in optional]
         if unknown:
             allowed = ", ".join(required + optional)
-            raise self.fail(_join(path, str(unknown[0])),
+            raise self.fail(key_path(path, str(unknown[0])),
                             f"unknown key (allowed here: {allowed})")
         for k in required:
             if k not in value:
-                raise self.fail(_join(path, k), "missing required key")
+                raise self.fail(key_path(path, k), "missing required key")
         return dict(value)
 
     def number(self, value: Any, path: str, *, lo: float | None = None,
                hi: float | None = None, lo_open: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(path, f"expected a number, got {_kind(value)}")
+            raise self.fail(path, f"expected a number, got {kind_of(value)}")
         try:
             x = float(value)
         except OverflowError:
@@ -163,21 +163,21 @@ class _Parser(GyroSections, SimulateSection):
     def integer(self, value: Any, path: str, lo: int | None = None,
                 hi: int | None = None) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(path, f"expected an integer, got {_kind(value)}")
+            raise self.fail(path, f"expected an integer, got {kind_of(value)}")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self.fail(path, f"must be in [{lo}, {hi}], got {value}")
         return value
 
     def string(self, value: Any, path: str) -> str:
         if not isinstance(value, str) or not value:
-            raise self.fail(path, f"expected a non-empty string, got {_kind(value)}")
+            raise self.fail(path, f"expected a non-empty string, got {kind_of(value)}")
         return value
 
     def names(self, value: Any, path: str, vocabulary: tuple[str, ...]) -> tuple[str, ...]:
         if isinstance(value, str):
             value = [v.strip() for v in value.split(",")]
         if not isinstance(value, list) or not value:
-            raise self.fail(path, f"expected a non-empty list, got {_kind(value)}")
+            raise self.fail(path, f"expected a non-empty list, got {kind_of(value)}")
         out: list[str] = []
         for i, v in enumerate(value):
             if v not in vocabulary:
@@ -201,7 +201,7 @@ class _Parser(GyroSections, SimulateSection):
     def boolean(self, value: Any, path: str) -> bool | None:
         if value is None or isinstance(value, bool):
             return value
-        raise self.fail(path, f"expected true or false, got {_kind(value)}")
+        raise self.fail(path, f"expected true or false, got {kind_of(value)}")
 
     def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...],
                         role: str | None = None) -> None:
@@ -242,7 +242,7 @@ class _Parser(GyroSections, SimulateSection):
         sess = self.mapping(top["session"], "session", ("name",),
                             ("output", "fsync", "formats"))
         name = self.string(sess["name"], "session.name")
-        if not _NAME_RE.match(name):
+        if not NAME_RE.match(name):
             raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
         fsync = bool(self.boolean(sess.get("fsync", True), "session.fsync"))
@@ -254,7 +254,7 @@ class _Parser(GyroSections, SimulateSection):
                 raise self.fail("session.formats", missing)
         bus = top["bus"]
         if not isinstance(bus, Mapping) or not bus:
-            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
+            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {kind_of(bus)}")
         if "interface" not in bus:
             raise self.fail("bus.interface", "missing required key")
         self.string(bus["interface"], "bus.interface")
@@ -268,7 +268,7 @@ class _Parser(GyroSections, SimulateSection):
         self.terms = self.plugins(top.get("plugins"))
         gyros_raw = top["gyros"]
         if not isinstance(gyros_raw, list) or not gyros_raw:
-            raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
+            raise self.fail("gyros", f"expected a non-empty list, got {kind_of(gyros_raw)}")
         gyros = tuple(self.gyro(g, f"gyros[{i}]") for i, g in enumerate(gyros_raw))
         seen: dict[str, int] = {}
         for i, g in enumerate(gyros):
@@ -301,7 +301,7 @@ class _Parser(GyroSections, SimulateSection):
             raise self.fail("plugins", str(exc)) from None
         mods = [] if value is None else value
         if not isinstance(mods, list) or not all(isinstance(m, str) and m for m in mods):
-            raise self.fail("plugins", f"expected a list of module names, got {_kind(value)}")
+            raise self.fail("plugins", f"expected a list of module names, got {kind_of(value)}")
         for i, m in enumerate(mods):
             try:
                 load_modules([m])

@@ -30,8 +30,8 @@ from ..core.model import Model
 from ..core.profiles import TemperatureProfile
 from ..core.simulation import simulate
 from ..errors import ConfigError, GyrostandError
+from ..runfolder import RunLog, make_run_dir, write_atomic
 from ..runfolder.layout import RESULT
-from .outputs import RunLog, make_run_dir, write_atomic
 from .pipeline import NullSink, Pipeline, RunOutcome
 
 __all__ = ["run_replay", "run_replays", "split_runs", "log_span", "simulated_truths",

@@ -43,12 +43,12 @@ from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
 from ..config import SessionConfig
 from ..errors import GyrostandError, OutputError
+from ..runfolder import EstimatesWriter, SegmentLog
 from ..runfolder.layout import RESULT
 from .acked import AckedFiles
 from .commands import CommandProtocol, TokenBucket
 from .final import write_provisional_result
 from .online import GyroTracker, OnlineEstimate
-from .outputs import EstimatesWriter, SegmentLog
 from .responses import BusSink, FrameSink, NullSink, Responses
 from .resume import ResumeState
 from .runend import RunOutcome, finish_run
@@ -70,7 +70,7 @@ class Pipeline:
 
     Args:
         cfg: the session.
-        run_dir: the run folder (see :mod:`~gyrostand.session.outputs`).
+        run_dir: the run folder (see :mod:`gyrostand.runfolder`).
         sink: where response frames go.
         source: ``"live"`` or ``"replay of <log>"`` (written into result.json).
         start_idle: begin ``idle`` (binning, no identification) until a ``start`` command.

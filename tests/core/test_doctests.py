@@ -20,7 +20,7 @@ CORE = ["gyrostand.core"] + [m.name for m in pkgutil.walk_packages(gyrostand.cor
 #: the modules whose docstrings carry runnable examples: each must run at least one
 WITH_EXAMPLES = ["gyrostand.core", "gyrostand.core.diagnose.allan", "gyrostand.core.registry",
                  "gyrostand.core.model", "gyrostand.core.profiles", "gyrostand.core.results",
-                 "gyrostand.core.simulation"]
+                 "gyrostand.core.simulation", "gyrostand.core.summary"]
 
 
 def _run(name: str) -> doctest.TestResults:

@@ -181,7 +181,7 @@ def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
     `design --separate` command with this run's path, model and limits (JSON too, the
     term's advice kept), and the text prints it."""
     from gyrostand.cli import build_parser
-    from gyrostand.render.text import diagnosis
+    from gyrostand.report.text import diagnosis
 
     path, temp, subject, rep = _trend_run_diagnosis(tmp_path)
     (la,) = rep.look_alikes

@@ -13,7 +13,7 @@ from gyrostand.core.diagnose.joint import JointDiagnosis
 from gyrostand.core.diagnose.results import TEST_SUP
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.ml.joint import joint_ml
-from gyrostand.render.text import RENDERER
+from gyrostand.report.text import RENDERER
 
 from .sets import run_set
 

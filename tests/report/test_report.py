@@ -19,7 +19,7 @@ from gyrostand.core.model import Model
 from gyrostand.report import default_dir, write_report
 from gyrostand.report.page import png_size
 from gyrostand.report.series import envelope, ledger_points, read_estimates
-from gyrostand.session.outputs import estimate_columns
+from gyrostand.runfolder import estimate_columns
 from gyrostand.workbench import open_subject, read_ledger, run_diagnose, run_fit
 
 from .conftest import chamber_samples

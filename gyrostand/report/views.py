@@ -12,20 +12,65 @@ import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
+
+from ..runfolder import json_safe
 
 if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
     from ..core.diagnose.results import Report
+    from ..core.model import Model
     from ..core.results import FitResult
-    from ..session.final import GyroFinal
-    from ..session.pipeline import RunOutcome
     from ..workbench import FitStep, Subject
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DiagnosisView", "FitStepView", "AllanView", "RunSummary", "RunReport",
-           "ReportPage", "Plot"]
+           "ReportPage", "Plot", "GyroFinals", "RunEnd"]
+
+
+class GyroFinals(Protocol):
+    """What the renderers read of one gyro's final fits at a run's end (the session's
+    :class:`~gyrostand.session.final.GyroFinal`): ``fits[method]`` a :class:`FitResult`
+    or the error that stopped it, ``unit`` the drift's, ``to_dict()`` its JSON."""
+
+    @property
+    def gyro(self) -> str: ...
+    @property
+    def model(self) -> Model: ...
+    @property
+    def bins(self) -> int: ...
+    @property
+    def gaps(self) -> int: ...
+    @property
+    def observed(self) -> int: ...
+    @property
+    def fits(self) -> Mapping[str, FitResult | str]: ...
+    @property
+    def unit(self) -> str: ...
+
+    def to_dict(self) -> dict[str, Any]: ...
+
+
+class RunEnd(Protocol):
+    """What the renderers read of a finished run (the session's
+    :class:`~gyrostand.session.runend.RunOutcome`): its folder and files, each gyro's
+    final fits, why it stopped, its final state and its counts."""
+
+    @property
+    def run_dir(self) -> Path: ...
+    @property
+    def result_json(self) -> Path: ...
+    @property
+    def report(self) -> Path: ...
+    @property
+    def finals(self) -> Sequence[GyroFinals]: ...
+    @property
+    def stop_reason(self) -> str: ...
+    @property
+    def state(self) -> str: ...
+    @property
+    def stats(self) -> Mapping[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -104,18 +149,16 @@ class RunSummary:
     """The end of a run as the command that ran it prints it: why it stopped, each gyro's
     final table (with the simulation's ``truths`` where known), the counts, the paths."""
 
-    outcome: RunOutcome
+    outcome: RunEnd
     truths: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        from ..session.final import _clean
-
         o = self.outcome
         return {"stop_reason": o.stop_reason, "state": o.state, "run_dir": str(o.run_dir),
                 "result": str(o.result_json) if o.result_json.is_file() else None,
                 "report": str(o.report) if o.report.is_file() else None,
                 "gyros": {f.gyro: f.to_dict() for f in o.finals},
-                "stats": _clean(o.stats), "unwritten": list(o.stats.get("unwritten", []))}
+                "stats": json_safe(o.stats), "unwritten": list(o.stats.get("unwritten", []))}
 
 
 @dataclass(frozen=True)
@@ -125,16 +168,14 @@ class RunReport:
 
     session: str
     source: str
-    finals: Sequence[GyroFinal]
+    finals: Sequence[GyroFinals]
     stats: Mapping[str, Any]
     truths: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        from ..session.final import _clean
-
         return {"session": self.session, "source": self.source,
                 "gyros": {f.gyro: f.to_dict() for f in self.finals},
-                "stats": _clean(dict(self.stats))}
+                "stats": json_safe(dict(self.stats))}
 
 
 @dataclass(frozen=True)

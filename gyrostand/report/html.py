@@ -27,7 +27,7 @@ from .views import AllanView, DiagnosisView, FitStepView, Plot, ReportPage, RunR
 
 if TYPE_CHECKING:
     from ..core.diagnose.results import Report
-    from ..session.final import GyroFinal
+    from .views import GyroFinals
 
 __all__ = ["RENDERER", "page", "table", "figure", "e", "num"]
 
@@ -322,7 +322,7 @@ def allan_block(view: AllanView | None) -> str:
 
 # ---- the end of a run ---------------------------------------------------------------------
 
-def result_table(final: GyroFinal, truth: Mapping[str, float] | None) -> str:
+def result_table(final: GyroFinals, truth: Mapping[str, float] | None) -> str:
     """One gyro's final fits: a column per method (the online lkf's batch refit left out
     where the text leaves it out), the truth first where known."""
     methods = list(final.fits)
@@ -353,7 +353,7 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None) -> str:
                             rows), *(f'<p class="meta">{e(n)}</p>' for n in notes)])
 
 
-def _gyros(finals: Sequence[GyroFinal], truths: Mapping[str, Mapping[str, float]]) -> str:
+def _gyros(finals: Sequence[GyroFinals], truths: Mapping[str, Mapping[str, float]]) -> str:
     return "\n".join(
         f"<h2>Gyro {e(f.gyro)}</h2><p>Model <code>{e(','.join(f.model.names))}</code>; "
         f"{f.bins} bins, {f.gaps} gaps, {f.observed} observed.</p>\n"

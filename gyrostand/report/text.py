@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.diagnose.joint import JointDiagnosis
 from ..core.ml.joint import JointFit
-from ..core.results import DRIFT_UNIT, UNIT_TEXT, FitResult, unit_text
+from ..core.results import FitResult
+from ..core.summary import fit_table, unit_text
 from . import ByKind
 from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
@@ -20,7 +21,7 @@ if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
     from ..core.diagnose.prederror import ModelError
     from ..core.diagnose.results import Report
-    from ..session.final import GyroFinal
+    from .views import GyroFinals
 
 __all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step", "allan",
            "result_table", "run_summary", "run_report", "estimate", "SAME_SIGMA", "joint_fit",
@@ -37,28 +38,9 @@ def estimate(value: float, std: float, unit: str, fixed: bool = False,
 # ---- identify ----------------------------------------------------------------------------
 
 def fit_result(r: FitResult) -> str:
-    """A readable table with units (``identify``, :meth:`FitResult.summary`)."""
-    lines = [
-        f"method {r.method}   model {','.join(r.model.names)}   "
-        f"samples {r.n_observed}/{r.n_samples} (dt {r.dt:g} s)",
-        f"data   {r.source}",
-        "",
-        f"{'parameter':<16} {'value':>14} {'std':>12}  unit",
-    ]
-    named = r.unit != DRIFT_UNIT  # the drift's unit given (identify --unit)
-    for k, e in r.parameters.items():
-        std = "fixed" if e.fixed else f"{e.std:12.4g}"
-        unit = unit_text(e.unit, r.unit) if named else UNIT_TEXT.get(e.unit, e.unit)
-        lines.append(f"{k:<16} {e.value:14.6g} {std:>12}  {unit}")
-    lines.append("")
-    if r.loglik is not None:
-        lines.append(f"log-likelihood {r.loglik:.6f}")
-    lines.append(f"residual RMS   {r.residual_rms:.6g} {r.unit}")
-    if not named:
-        lines.append("(y = the drift's unit, e.g. deg/h)")
-    for w in r.warnings:
-        lines.append(f"warning: {w}")
-    return "\n".join(lines)
+    """A readable table with units (``identify``): :meth:`FitResult.summary`'s
+    (:func:`gyrostand.core.summary.fit_table`)."""
+    return fit_table(r)
 
 
 # ---- diagnose ----------------------------------------------------------------------------
@@ -272,7 +254,7 @@ def allan(view: AllanView) -> str:
 SAME_SIGMA = 0.05
 
 
-def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
+def result_table(final: GyroFinals, truth: Mapping[str, float] | None = None) -> str:
     """One gyro's parameters: a column per method (value ± std), truth first if known.
 
     ``lkf`` is the online LKF at stop (what the last CAN round sent), ``lkf_batch`` the
