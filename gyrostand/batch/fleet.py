@@ -341,13 +341,15 @@ def _unit_plots(rows: Sequence[dict[str, Any]], unit: str,
     out = []
     for t in trd:
         p = t["parameter"]
-        pts = sorted((_date(r.get("date")), float(r[p]), _num(r.get(f"{p}_std")) or 0.0)
-                     for r in mine if _unit(r) == t["unit"] and _num(r.get(p)) is not None)
+        pts: list[tuple[_dt.date, float, float]] = sorted(
+            (day, float(r[p]), _num(r.get(f"{p}_std")) or 0.0)
+            for r in mine if _unit(r) == t["unit"] and _num(r.get(p)) is not None
+            and (day := _date(r.get("date"))) is not None)
         fig, ax = plt.subplots(figsize=(7, 2.6))
         ax.errorbar([d for d, _, _ in pts], [v for _, v, _ in pts],  # type: ignore[arg-type]
                     yerr=[e for _, _, e in pts], fmt="o", ms=3, lw=0.8)
-        tm = sum(d.toordinal() for d, _, _ in pts) / len(pts) / 365.25  # type: ignore[union-attr]
-        line = [t["mean"] + t["slope_per_year"] * (d.toordinal() / 365.25 - tm)  # type: ignore[union-attr]
+        tm = sum(d.toordinal() for d, _, _ in pts) / len(pts) / 365.25
+        line = [t["mean"] + t["slope_per_year"] * (d.toordinal() / 365.25 - tm)
                 for d, _, _ in pts]
         ci = t["slope_ci"]
         lab = f"{t['slope_per_year']:.4g}/year" + (f" [{ci[0]:.3g}, {ci[1]:.3g}]" if ci else "")

@@ -12,6 +12,7 @@ from gyrostand.core import registry
 from gyrostand.core.names import LKF_VARIANTS
 from gyrostand.errors import CanEdgeError
 
+from .reader import Reader
 from .schema import (
     IDENTIFIERS,
     MATCHES,
@@ -27,7 +28,7 @@ from .schema import (
 )
 
 
-class GyroSections:
+class GyroSections(Reader):
     """Mixin of :class:`~gyrostand.config.parser.Parser`: the ``gyros:`` entries."""
 
     def channel(self, value: Any, path: str) -> ChannelConfig:
@@ -157,19 +158,10 @@ class GyroSections:
         every = None if every is None else self.integer(every, f"{path}.relinearize_every",
                                                         1, 10_000_000)
         soaked = bool(self.boolean(m.get("soaked", True), f"{path}.soaked"))
-        return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate,
-                         variant=variant, relinearize_every=every, soaked=soaked, **vals)
-
-    def model_of(self, model: tuple[str, ...], path: str) -> Any:
-        """The core :class:`~gyrostand.core.model.Model` of ``model`` (a ConfigError at
-        ``path`` when the terms do not make one, so no run folder is started for it)."""
-        from gyrostand.core.model import Model
-        from gyrostand.errors import ModelError
-
-        try:
-            return Model.parse(list(model))
-        except ModelError as exc:
-            raise self.fail(path, str(exc)) from None
+        return LkfConfig(beta0=vals["beta0"], gamma0=vals["gamma0"], b0=vals["b0"],
+                         sigma=vals["sigma"], white_sigma=vals["white_sigma"],
+                         held=MappingProxyType(held), warmup=warmup, iterate=iterate,
+                         variant=variant, relinearize_every=every, soaked=soaked)
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         """A drift signal belongs to one gyro; a temperature signal may serve several (one

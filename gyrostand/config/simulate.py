@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
+from .reader import Reader
 from .schema import (
     MAX_EPOCH,
     MAX_RATE_HZ,
@@ -16,7 +17,7 @@ from .schema import (
 )
 
 
-class SimulateSection:
+class SimulateSection(Reader):
     """Mixin of :class:`~gyrostand.config.parser.Parser`: ``simulate:``."""
 
     def simulate(self, value: Any, gyro_names: list[str]) -> SimulateConfig:

@@ -42,7 +42,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
     titles = []
     for r, (s, run) in enumerate(zip(samples, fit.runs, strict=True)):
         p = run.values
-        X = model.regressors(p, context(s))
+        X = model.regressors(p, context(s, model))
         det = X @ np.array([p[k] for k in lin]) if lin else np.zeros(len(s))
         dets.append(det)
         err = np.asarray(s.drift) - det

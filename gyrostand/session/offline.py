@@ -204,5 +204,8 @@ def simulated_truths(cfg: SessionConfig) -> list[Truth]:
 def simulated_frames(cfg: SessionConfig) -> Iterator[can.Message]:
     """The simulated stand's frames (time-ordered), per the config's ``simulate`` section."""
     truths = simulated_truths(cfg)  # raises ConfigError without a simulate section
+    sim = cfg.simulate
+    if sim is None:  # (simulated_truths refuses it first)
+        raise ConfigError(f"{cfg.path}: simulate: missing")
     return generate_frames(cfg.db, ChannelMap.from_config(cfg), truths,
-                           FrameSimOptions.from_config(cfg.simulate))
+                           FrameSimOptions.from_config(sim))

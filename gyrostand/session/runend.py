@@ -91,7 +91,7 @@ def finish_run(pipe: Ending, reason: str, *, extra_stats: dict[str, Any] | None 
     protocol.end("fail" if state == FAULT else "end")
     unwritten: list[str] = []
 
-    def attempt(write: Callable[[], None]) -> None:
+    def attempt(write: Callable[[], object]) -> None:
         try:
             write()
         except OutputError as exc:  # e.g. the disk is full: say so, finish the rest

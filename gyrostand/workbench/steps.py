@@ -78,10 +78,12 @@ def with_design_commands(rep: Report, subject: Subject) -> Report:
     run that tells them apart within this run's limits (:func:`design_command`)."""
     source = subject.run_dir if subject.run_dir is not None else subject.samples.source
     gyro = subject.gyro if subject.origin == "run" else None
+    def command(terms: Sequence[str]) -> str:
+        a, b = terms
+        return design_command(str(source), a, b, subject.samples, subject.model, gyro=gyro)
+
     return dataclasses.replace(rep, look_alikes=tuple(
-        {**la, "command": design_command(str(source), *la["terms"], subject.samples,
-                                         subject.model, gyro=gyro)}
-        for la in rep.look_alikes))
+        {**la, "command": command(la["terms"])} for la in rep.look_alikes))
 
 
 @dataclass(frozen=True)

@@ -172,7 +172,7 @@ def test_first_figure_keeps_the_measured_trace_visible(chamber_report):
     subject, rep = chamber_report
     s = subject.samples
     p = rep.fit.values
-    X = rep.model.regressors(p, context(s))
+    X = rep.model.regressors(p, context(s, rep.model))
     det = X @ np.array([p[k] for k in rep.model.names_of_kind("linear")])
     fig = figures.measured_vs_model(s, rep, det)
     ax = fig.axes[0]
