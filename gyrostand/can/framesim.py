@@ -36,7 +36,7 @@ from cantools.database.can import Message as CanMessage
 
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.dbc import SignalRef, frame_key
-from gyrostand.can.decode import ChannelMap
+from gyrostand.can.routes import ChannelMap
 from gyrostand.errors import CanEdgeError
 
 __all__ = ["Truth", "FrameSimOptions", "generate_frames", "send_frames", "write_log",

@@ -39,8 +39,9 @@ from typing import Any
 
 from ..can.binning import Bin, Binner, SamplesWriter
 from ..can.bus import COMMANDS
-from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
+from ..can.receive.listener import DecodingListener
+from ..can.routes import ChannelMap
 from ..config import SessionConfig
 from ..errors import GyrostandError, OutputError
 from ..runfolder.layout import RESULT

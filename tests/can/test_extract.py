@@ -12,8 +12,9 @@ import cantools
 import pytest
 
 from gyrostand.can.dbc import find_signal, load_dbc
-from gyrostand.can.decode import ChannelMap, DecodingListener
-from gyrostand.can.extract import extractor
+from gyrostand.can.receive.extract import extractor
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 
 ROOT = Path(__file__).resolve().parents[2]
 DBCS = sorted([*ROOT.glob("dbc/*.dbc"), *ROOT.glob("tests/data/*.dbc")])

@@ -13,7 +13,8 @@ import cantools
 import pytest
 
 from gyrostand.can.dbc import j1939_pgn
-from gyrostand.can.decode import ChannelMap, DecodingListener
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import parse_config
 from gyrostand.errors import ConfigError
 

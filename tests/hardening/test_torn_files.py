@@ -16,7 +16,7 @@ import can
 import pytest
 
 from gyrostand.can.binning import read_samples_csv
-from gyrostand.can.logread import LogDamage
+from gyrostand.can.logs.read import LogDamage
 from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import read_log
 from gyrostand.core.data import Samples
