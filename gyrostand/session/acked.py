@@ -19,8 +19,9 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from ..can.binning import Bin, SamplesWriter
+from ..can.binning import Bin
 from ..errors import OutputError
+from ..runfolder import SamplesWriter
 from ..runfolder.layout import ESTIMATES, SNAPSHOT
 from .online import GyroTracker
 from .outputs import EstimatesWriter, write_atomic

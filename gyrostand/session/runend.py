@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..can.binning import read_samples_csv
 from ..errors import OutputError
+from ..runfolder import read_samples_csv
 from ..runfolder.layout import REPORT, RESULT
 from .commands import FAULT, STOPPED
 from .final import GyroFinal, fit_gyro, write_report, write_result_json

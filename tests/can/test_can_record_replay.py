@@ -9,7 +9,6 @@ import can
 import pytest
 from canhelpers import make_ingest, smooth_truth
 
-from gyrostand.can.binning import SamplesWriter, read_samples_csv
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.framesim import (
     BAD_KINDS,
@@ -23,6 +22,7 @@ from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import paced, read_log, replay
 from gyrostand.can.routes import ChannelMap
 from gyrostand.errors import CanEdgeError
+from gyrostand.runfolder import SamplesWriter, read_samples_csv
 
 T0 = 1_700_000_000.0
 
