@@ -86,10 +86,10 @@ def _warm() -> int:
     """Import the replay and the workbench, and load the numba kernels (a short ML fit)."""
     import gyrostand.session.offline  # noqa: F401
     import gyrostand.workbench  # noqa: F401
-    from gyrostand.core.ml import ml
+    from gyrostand.core.ml.fit import ml
     from gyrostand.core.model import Model
     from gyrostand.core.profiles import paper_profile
-    from gyrostand.core.simulate import simulate
+    from gyrostand.core.simulation import simulate
 
     m = Model.parse("markov,temp")
     ml(simulate(m, {"markov.beta": 0.0333, "markov.sigma": 0.1, "temp.gamma": -0.001,

@@ -28,7 +28,7 @@ cache written):
 * where ``identify``'s time goes, in one process: imports, reading the CSV, the first
   kernel load, the fit and the JSON output (medians over the runs).
 
-The CSV: ``gyrostand.core.simulate`` of ``markov,temp,bias`` on ``chamber_profile(6 h)``
+The CSV: ``gyrostand.core.simulation`` of ``markov,temp,bias`` on ``chamber_profile(6 h)``
 (21,601 one-second samples, seed 1), in a temporary folder.
 
 ``--python PY`` times the ``gyrostand`` installed for another interpreter (e.g. a checkout
@@ -53,7 +53,7 @@ from pathlib import Path
 
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 TRUTH = {"markov.beta": 0.0333, "markov.sigma": 0.1, "temp.gamma": -0.001,
          "white.sigma": 0.05, "bias.b": 0.5}
@@ -180,7 +180,7 @@ mark("scipy.linalg (numba's BLAS check)")
 import scipy.optimize
 mark("scipy.optimize")
 from gyrostand.core import ml as _ml, model as _model, registry as _registry
-from gyrostand.render import render
+from gyrostand.report import render
 mark("gyrostand core modules")
 from gyrostand.core.data import Samples
 s = Samples.read_csv(sys.argv[1])

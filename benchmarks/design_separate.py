@@ -5,7 +5,7 @@ markov,temp,bias with β = 0.0015, σ = 0.05, γ = −0.0002, b = 0.1, white σ 
 τ (default 120 s) whose look-alike is the pseudo-true markov2 (the ML fit of the base +
 markov2 to a record simulated from the lag model on the standard cycle). Printed:
 
-* the expected LR Λ (the analytic 2 KL of :mod:`gyrostand.core.separation`, the wrong model
+* the expected LR Λ (the analytic 2 KL of :mod:`gyrostand.core.design.separation`, the wrong model
   re-fitted) each direction on the designed program and on the standard cycle, and the
   ratio of the sums (target >= 4);
 * ``N`` simulated runs from EACH model on EACH program, both models fitted by ML: how often
@@ -16,7 +16,7 @@ markov2 to a record simulated from the lag model on the standard cycle). Printed
 
 trend / warmup (``--pair trend warmup``): the single 6-h program's Λ and the free-bias
 switch-on splits (which do not separate them), then the power-cycle protocol of
-:func:`gyrostand.core.switch_ons.separate_power_cycle` (k switch-ons within the powered-on
+:func:`gyrostand.core.design.switch_ons.separate_power_cycle` (k switch-ons within the powered-on
 budget, off periods up to ``--off`` h, the turn-on bias a random effect of spread
 ``--spread``): its Λ and gain over the standard cycle, the gain at σ_b = 0.03, 0.1, 0.3,
 and the verify of ``N`` sets from each model fitted by the protocol's joint ML.
@@ -35,9 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gyrostand.core.design import ChamberLimits, case_temperature, standard_cycle  # noqa: E402
+from gyrostand.core.design.search import ChamberLimits, case_temperature, standard_cycle  # noqa: E402
+from gyrostand.core.design.separation import rivals, separate, verify  # noqa: E402
 from gyrostand.core.model import Model  # noqa: E402
-from gyrostand.core.separation import rivals, separate, verify  # noqa: E402
 
 BASE = {"markov.beta": 0.0015, "markov.sigma": 0.05, "temp.gamma": -0.0002, "bias.b": 0.1,
         "white.sigma": 0.01}
@@ -121,7 +121,11 @@ def trend_vs_warmup(n: int, evaluations: int, hours: float, spread: float, off: 
     import os
     import subprocess
 
-    from gyrostand.core.switch_ons import separate_power_cycle, separate_switch_ons, verify_protocol
+    from gyrostand.core.design.switch_ons import (
+        separate_power_cycle,
+        separate_switch_ons,
+        verify_protocol,
+    )
 
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,

@@ -15,13 +15,13 @@ import time
 
 import numpy as np
 
-from gyrostand.core.candidates import diagnose, fit_error, rank_candidates
 from gyrostand.core.data import Samples
-from gyrostand.core.diagnostics import diagnose_fit
-from gyrostand.core.ml import ml
+from gyrostand.core.diagnose.candidates import diagnose, fit_error, rank_candidates
+from gyrostand.core.diagnose.diagnostics import diagnose_fit
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 ANCHOR_S = 10.0
 

@@ -37,7 +37,7 @@ TARGET = 0.05
 #: records stretch the supremum over a candidate's shape: with the shapes counted in
 #: χ²(df), hysteresis's LR averaged ~3.9 on 2-h cycles against χ²(3)'s 3 and the 2-h
 #: false-alarm rate was 7/100; the calibrated test (the supremum of a χ² process over the
-#: shape, gyrostand.core.candidates) refers it to its own tail
+#: shape, gyrostand.core.diagnose.candidates) refers it to its own tail
 HOURS = 6.0
 
 

@@ -33,10 +33,10 @@ import numpy as np
 
 from gyrostand.config import LkfConfig
 from gyrostand.core.data import Samples
-from gyrostand.core.ml import ml
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import TemperatureProfile, paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.session.online import LkfTrack
 
 CASES = {"C1": (0.0333, -0.01), "C2": (0.0333, -0.001), "C3": (0.00055, -0.001)}

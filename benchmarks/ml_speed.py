@@ -3,7 +3,7 @@
 What it measures, on one simulated 6-hour run (21,601 one-second samples, the chamber
 profile, model ``markov,temp,bias`` + white noise, truth ``TRUTH`` below, seed 1):
 
-* ``gyrostand.core.ml.ml`` — our exact Gaussian ML (numba Kalman filter, γ and b
+* ``gyrostand.core.ml.fit.ml`` — our exact Gaussian ML (numba Kalman filter, γ and b
   concentrated out by GLS, the noise scale concentrated out, multi-start L-BFGS-B seeded by
   least squares, standard errors from the observed information);
 * a custom ``statsmodels.tsa.statespace.mlemodel.MLEModel`` of the SAME model:
@@ -65,11 +65,11 @@ import statsmodels
 from scipy.signal import lfilter
 from statsmodels.tsa.statespace.mlemodel import MLEModel
 
-from gyrostand.core.lsq import lsq
-from gyrostand.core.ml import ml
+from gyrostand.core.lsq.fit import lsq
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 TRUTH = {"markov.beta": 0.0333, "markov.sigma": 0.1, "temp.gamma": -0.001,
          "white.sigma": 0.05, "bias.b": 0.5}

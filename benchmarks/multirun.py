@@ -3,11 +3,11 @@
 Each set is five 2-h chamber cycles of one simulated gyro (tests/multirun/sets.py: shared
 β, σ, γ, white noise; per-run turn-on biases drawn with spread 0.1; every run from its own
 stationary initial state). Each run is fitted alone by ML and the five jointly
-(gyrostand.core.multirun.joint_ml). Printed:
+(gyrostand.core.ml.joint.joint_ml). Printed:
 
 * the std of γ: the joint fit's (empirical over the sets, and the mean reported one) beside
   the anchor, one run's std / √5 (empirical over all single runs, and mean reported), and
-  beside one run's Cramér–Rao bound / √5 (:func:`gyrostand.core.fisher.crlb` at the truth).
+  beside one run's Cramér–Rao bound / √5 (:func:`gyrostand.core.design.fisher.crlb` at the truth).
   The Fisher information of the shared parameters adds up over the runs (the per-run bias
   and initial state are separate blocks: the Schur complement is 5× one run's), so one
   run's CRLB / √5 *is* the joint fit's CRLB, and the ratio's expectation is 1 for an
@@ -40,9 +40,9 @@ from scipy.stats import beta
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gyrostand.core.fisher import crlb  # noqa: E402
-from gyrostand.core.ml import ml  # noqa: E402
-from gyrostand.core.multirun import joint_ml  # noqa: E402
+from gyrostand.core.design.fisher import crlb  # noqa: E402
+from gyrostand.core.ml.fit import ml  # noqa: E402
+from gyrostand.core.ml.joint import joint_ml  # noqa: E402
 from tests.multirun.sets import BIAS_MEAN, PHYSICS, SPREAD, run_set  # noqa: E402
 
 N_RUNS = 5

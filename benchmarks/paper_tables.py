@@ -80,17 +80,17 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from gyrostand.core.fisher import crlb  # noqa: E402
-from gyrostand.core.lkf import lkf  # noqa: E402
+from gyrostand.core.design.fisher import crlb  # noqa: E402
+from gyrostand.core.lkf.filter import lkf  # noqa: E402
 
 # the paper variant logs its loud warnings per fit (thousands here); the tables count them
 # from each result's warnings instead
-logging.getLogger("gyrostand.core.lkf").setLevel(logging.ERROR)
-from gyrostand.core.lsq import lsq  # noqa: E402
-from gyrostand.core.ml import ml  # noqa: E402
+logging.getLogger("gyrostand.core.lkf.filter").setLevel(logging.ERROR)
+from gyrostand.core.lsq.fit import lsq  # noqa: E402
+from gyrostand.core.ml.fit import ml  # noqa: E402
 from gyrostand.core.model import Model  # noqa: E402
 from gyrostand.core.profiles import paper_profile  # noqa: E402
-from gyrostand.core.simulate import simulate  # noqa: E402
+from gyrostand.core.simulation import simulate  # noqa: E402
 
 # ---- the paper --------------------------------------------------------------------------
 CASES = {"C1": (0.0333, -0.01), "C2": (0.0333, -0.001),

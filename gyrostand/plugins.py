@@ -36,6 +36,19 @@ GROUP = "gyrostand.terms"
 _loaded_entry_points = False
 
 
+def available_terms() -> tuple[str, ...]:
+    """Every term a model may name here: the built-in vocabulary, then each installed
+    ``gyrostand.terms`` entry point by its name (the term's), without importing it, so a
+    command's ``--help`` lists the plugins without the cost of loading them. (A session
+    file's ``plugins:`` module is known only once its file is read.)"""
+    from importlib.metadata import entry_points
+
+    from .core.names import VOCABULARY
+
+    extra = sorted({ep.name for ep in entry_points(group=GROUP)} - set(VOCABULARY))
+    return (*VOCABULARY, *extra)
+
+
 def load_entry_points() -> list[str]:
     """Register the terms of every installed ``gyrostand.terms`` entry point (once per
     process; sorted by name, so their summary bits do not depend on install order).
@@ -88,13 +101,13 @@ def load_modules(modules: Iterable[str]) -> list[str]:
 
 def known_terms() -> tuple[str, ...]:
     """Every term a model may use now: the built-ins, then the registered plugins."""
-    from .core.terms import TERMS
+    from .core.terms.builtin import TERMS
 
     return tuple(TERMS)
 
 
 def _register(cls: Any, where: str) -> str:
-    from .core.terms import register
+    from .core.terms.builtin import register
 
     register(cls, where)
     return str(cls.name)
@@ -103,7 +116,7 @@ def _register(cls: Any, where: str) -> str:
 def _term_classes(obj: Any, where: str) -> list[Any]:
     """The Term subclasses an entry point or module provides: the class itself, a
     module's ``TERMS`` list, or the subclasses a module defines."""
-    from .core.terms import Term
+    from .core.terms.builtin import Term
 
     if isinstance(obj, type):
         if not issubclass(obj, Term):

@@ -3,7 +3,7 @@ import pytest
 
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 #: the paper's four cases (MODEL.md): beta (1/s), gamma
 CASES = {"C1": (0.0333, -0.01), "C2": (0.0333, -0.001), "C3": (0.00055, -0.001),

@@ -11,12 +11,12 @@ import sys
 
 import pytest
 
-from gyrostand.core.identify import IDENTIFIERS
 from gyrostand.core.model import Model
 from gyrostand.core.names import METHODS, VOCABULARY
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
-from gyrostand.core.terms import TERMS
+from gyrostand.core.registry import REGISTRY
+from gyrostand.core.simulation import simulate
+from gyrostand.core.terms.builtin import TERMS
 
 from .conftest import truth
 
@@ -87,19 +87,27 @@ def test_identify_ml_imports_neither_scipy_stats_nor_can_nor_matplotlib(csv_path
 
 
 def test_the_core_package_exports_what_it_did():
-    """``from gyrostand.core import X`` gives the same objects as the submodules, also for
-    the functions named like their submodule, whichever is imported first."""
-    code = ("import gyrostand.core.ml, gyrostand.core.identify, gyrostand.core.simulate\n"
-            "import gyrostand.core as core\n"
-            "from gyrostand.core import identify, lkf, lsq, ml, simulate\n"
-            "import types\n"
-            "for f in (identify, lkf, lsq, ml, simulate):\n"
+    """``from gyrostand.core import X`` (and ``from gyrostand.core.SUB import X`` for each
+    subpackage) gives the object its module defines, whichever is imported first; the
+    identifiers' functions are their subpackages' (``gyrostand.core.ml.ml``)."""
+    code = ("import importlib, types\n"
+            "import gyrostand.core.ml.fit, gyrostand.core.lkf.filter, gyrostand.core.lsq.fit\n"
+            "from gyrostand.core.ml import ml\n"
+            "from gyrostand.core.lkf import lkf\n"
+            "from gyrostand.core.lsq import lsq\n"
+            "from gyrostand.core.diagnose import diagnose\n"
+            "from gyrostand.core import identify, simulate\n"
+            "for f in (identify, lkf, lsq, ml, simulate, diagnose):\n"
             "    assert isinstance(f, types.FunctionType), f\n"
-            "import importlib\n"
-            "for name in core.__all__:\n"
-            "    src = importlib.import_module('gyrostand.core.' + core._SOURCES[name])\n"
-            "    assert getattr(core, name) is getattr(src, name), name\n"
-            "assert set(core.__all__) <= set(dir(core))\n"
+            "for pkg in ('gyrostand.core', 'gyrostand.core.ml', 'gyrostand.core.lkf',\n"
+            "            'gyrostand.core.lsq', 'gyrostand.core.diagnose',\n"
+            "            'gyrostand.core.design', 'gyrostand.core.terms'):\n"
+            "    p = importlib.import_module(pkg)\n"
+            "    for name, source in p.EXPORTS.items():\n"
+            "        src = importlib.import_module(pkg + '.' + source)\n"
+            "        assert getattr(p, name) is getattr(src, name), (pkg, name)\n"
+            "    assert set(p.__all__) <= set(dir(p))\n"
+            "core = importlib.import_module('gyrostand.core')\n"
             "try:\n"
             "    core.no_such_name\n"
             "except AttributeError as e:\n"
@@ -111,4 +119,4 @@ def test_the_core_package_exports_what_it_did():
 
 def test_the_light_names_are_the_core_s_names():
     assert VOCABULARY == tuple(TERMS)  # same names, same (PRODUCT.md) order
-    assert sorted(METHODS) == sorted(IDENTIFIERS)
+    assert sorted(METHODS) == sorted(REGISTRY)

@@ -36,6 +36,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..runfolder import write_atomic
+from .table import columns
+
 __all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "write_view",
            "Z_LIMIT", "MIN_GROUP", "CONFIDENCE"]
 
@@ -338,13 +341,15 @@ def _unit_plots(rows: Sequence[dict[str, Any]], unit: str,
     out = []
     for t in trd:
         p = t["parameter"]
-        pts = sorted((_date(r.get("date")), float(r[p]), _num(r.get(f"{p}_std")) or 0.0)
-                     for r in mine if _unit(r) == t["unit"] and _num(r.get(p)) is not None)
+        pts: list[tuple[_dt.date, float, float]] = sorted(
+            (day, float(r[p]), _num(r.get(f"{p}_std")) or 0.0)
+            for r in mine if _unit(r) == t["unit"] and _num(r.get(p)) is not None
+            and (day := _date(r.get("date"))) is not None)
         fig, ax = plt.subplots(figsize=(7, 2.6))
         ax.errorbar([d for d, _, _ in pts], [v for _, v, _ in pts],  # type: ignore[arg-type]
                     yerr=[e for _, _, e in pts], fmt="o", ms=3, lw=0.8)
-        tm = sum(d.toordinal() for d, _, _ in pts) / len(pts) / 365.25  # type: ignore[union-attr]
-        line = [t["mean"] + t["slope_per_year"] * (d.toordinal() / 365.25 - tm)  # type: ignore[union-attr]
+        tm = sum(d.toordinal() for d, _, _ in pts) / len(pts) / 365.25
+        line = [t["mean"] + t["slope_per_year"] * (d.toordinal() / 365.25 - tm)
                 for d, _, _ in pts]
         ci = t["slope_ci"]
         lab = f"{t['slope_per_year']:.4g}/year" + (f" [{ci[0]:.3g}, {ci[1]:.3g}]" if ci else "")
@@ -363,15 +368,13 @@ def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
     """``<out>/fleet.html`` (atomically) and ``<out>/fleet.json`` (flags, spreads,
     trends, and with ``trend_unit`` that unit's trends); the table's runs link to their
     reports."""
-    from .table import _columns
-
     out = Path(out)
     flags = outliers(rows)
     spr = spreads(rows)
     trd = trends(rows)
     mine = trends(rows, trend_unit) if trend_unit else []
     flagged = {(f["run"], f["gyro"], f["parameter"]) for f in flags}
-    cols = [c for c in _columns(rows, attrs) if c not in ("source", "config", "run_dir")]
+    cols = [c for c in columns(rows, attrs) if c not in ("source", "config", "run_dir")]
     head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
     body = []
     for r in rows:
@@ -409,13 +412,10 @@ def write_view(rows: Sequence[dict[str, Any]], out: str | Path,
         f"<h2>Table (click a header to sort)</h2>"
         f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}'
         f"</tbody></table><script>{_JS}</script></body></html>\n")
-    from .table import _atomic_bytes
-
-    _atomic_bytes(out / "fleet.json", (json.dumps(
+    write_atomic(out / "fleet.json", json.dumps(
         {"outliers": flags, "spreads": spr, "trends": trd,
          **({"trend_unit": {"unit": trend_unit, "trends": mine}} if trend_unit else {})},
-        indent=1, allow_nan=False)
-        + "\n").encode("utf-8"))
+        indent=1, allow_nan=False) + "\n")
     path = out / "fleet.html"
-    _atomic_bytes(path, page.encode("utf-8"))
+    write_atomic(path, page)
     return path

@@ -23,15 +23,15 @@ from __future__ import annotations
 
 import csv
 import io
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..runfolder import write_atomic
 from .inputs import RunSpec
 from .tasks import read_record
 
-__all__ = ["fleet_rows", "write_table", "COLUMNS_HEAD", "COLUMNS_TAIL"]
+__all__ = ["fleet_rows", "write_table", "columns", "COLUMNS_HEAD", "COLUMNS_TAIL"]
 
 COLUMNS_HEAD = ("status", "error", "kind", "source", "config", "frames", "decoded",
                 "rejected", "log_damage", "bins", "gaps", "observed", "model", "method",
@@ -69,7 +69,9 @@ def fleet_rows(specs: Sequence[RunSpec], out: str | Path) -> list[dict[str, Any]
     return rows
 
 
-def _columns(rows: Sequence[dict[str, Any]], attrs: Sequence[str]) -> list[str]:
+def columns(rows: Sequence[dict[str, Any]], attrs: Sequence[str]) -> list[str]:
+    """The fleet table's columns for ``rows`` in the order of the module doc (``attrs``
+    the manifest's attributes), a column only where some row has it."""
     seen: set[str] = set()
     for r in rows:
         seen.update(r)
@@ -78,22 +80,12 @@ def _columns(rows: Sequence[dict[str, Any]], attrs: Sequence[str]) -> list[str]:
     return [c for c in (*head, *params, *COLUMNS_TAIL) if c in seen]
 
 
-def _atomic_bytes(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def write_table(rows: Sequence[dict[str, Any]], out: str | Path, attrs: Sequence[str] = (),
                 *, parquet: bool = True) -> dict[str, Path]:
     """``<out>/fleet.csv`` and (with pyarrow) ``<out>/fleet.parquet``, each written
     atomically; returns the paths written."""
     out = Path(out)
-    cols = _columns(rows, attrs)
+    cols = columns(rows, attrs)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols)
@@ -101,7 +93,7 @@ def write_table(rows: Sequence[dict[str, Any]], out: str | Path, attrs: Sequence
         w.writerow(["" if r.get(c) is None else (f"{r[c]:.10g}" if isinstance(r[c], float)
                                                  else r[c]) for c in cols])
     paths = {"csv": out / "fleet.csv"}
-    _atomic_bytes(paths["csv"], buf.getvalue().encode("utf-8"))
+    write_atomic(paths["csv"], buf.getvalue().encode("utf-8"))
     if parquet:
         try:
             import pyarrow as pa
@@ -121,5 +113,5 @@ def write_table(rows: Sequence[dict[str, Any]], out: str | Path, attrs: Sequence
         sink = pa.BufferOutputStream()
         pq.write_table(table, sink)
         paths["parquet"] = out / "fleet.parquet"
-        _atomic_bytes(paths["parquet"], sink.getvalue().to_pybytes())
+        write_atomic(paths["parquet"], sink.getvalue().to_pybytes())
     return paths

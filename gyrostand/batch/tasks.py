@@ -83,7 +83,7 @@ def read_record(out: str | Path, run: str) -> dict[str, Any] | None:
 
 
 def _write_record(out: str | Path, rec: dict[str, Any]) -> None:
-    from ..session.outputs import write_atomic
+    from ..runfolder import write_atomic
 
     path = result_path(out, rec["run"])
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -110,8 +110,8 @@ def _finite(x: Any) -> float | None:
 def _replay_into(spec: RunSpec, out: Path) -> Path:
     """Replay the run into ``<out>/replays/<run>`` (reused when already finished)."""
     from ..config import load_config
+    from ..runfolder import raw_segments
     from ..session.offline import run_replay
-    from ..session.outputs import raw_segments
 
     dest = out / "replays" / spec.run
     done = dest / RESULT
@@ -169,7 +169,7 @@ def _run_info(run_dir: Path) -> dict[str, Any]:
 
 def _gyro_row(run_dir: Path, gyro: str, ginfo: dict[str, Any], opts: TaskOptions
               ) -> dict[str, Any]:
-    from ..core.identify import identify
+    from ..core.registry import identify
     from ..workbench import open_subject, run_diagnose
 
     row: dict[str, Any] = {"gyro": gyro, "bins": ginfo.get("bins"), "gaps": ginfo.get("gaps"),

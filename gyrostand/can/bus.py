@@ -30,7 +30,7 @@ from gyrostand.can.codes import (
 )
 from gyrostand.can.dbc import MessageRef, find_message
 from gyrostand.can.pack import packer
-from gyrostand.core.terms import VOCABULARY, summary_bits
+from gyrostand.core.terms.builtin import VOCABULARY, summary_bits
 from gyrostand.errors import CanEdgeError
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Frames from a 1-s truth: the stand's electronics, simulated for any DBC layout.
 
 Input per gyro: arrays ``t`` (s, from 0, step Δt), ``drift`` (the drift signal's unit,
-deg/h in our DBC) and ``temp`` (degC), e.g. from ``gyrostand.core.simulate``. Output: a
+deg/h in our DBC) and ``temp`` (degC), e.g. from ``gyrostand.core.simulation``. Output: a
 time-ordered iterator of :class:`can.Message`, encoded by cantools.
 
 Channels that the mapping puts in the same message and multiplexer value form one
@@ -25,7 +25,7 @@ import logging
 import math
 from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -34,9 +34,8 @@ import numpy as np
 from cantools.database.can import Database, Signal
 from cantools.database.can import Message as CanMessage
 
-from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.dbc import SignalRef, frame_key
-from gyrostand.can.decode import ChannelMap
+from gyrostand.can.routes import ChannelMap
 from gyrostand.errors import CanEdgeError
 
 __all__ = ["Truth", "FrameSimOptions", "generate_frames", "send_frames", "write_log",
@@ -67,7 +66,10 @@ class Truth:
 class FrameSimOptions:
     """Rates (Hz) of the drift and temperature channels; ``jitter`` half-width (s);
     ``drop`` probability; sensor quantization steps (physical units, 0 = none);
-    ``start`` timestamp (s) of truth t = 0; ``seed`` of the generator."""
+    ``start`` timestamp (s) of truth t = 0; ``seed`` of the generator.
+
+    The one owner of these fields: a session's ``simulate:`` section
+    (:class:`gyrostand.config.SimulateConfig`) is these options and the truth."""
 
     drift_rate: float = 100.0
     temperature_rate: float = 10.0
@@ -92,10 +94,10 @@ class FrameSimOptions:
             raise ValueError("drop must be in [0, 1)")
 
     @classmethod
-    def from_config(cls, sim) -> FrameSimOptions:  # sim: gyrostand.config.SimulateConfig
-        return cls(sim.drift_rate, sim.temperature_rate, sim.interpolation, sim.jitter,
-                   sim.drop, sim.drift_quantization, sim.temperature_quantization,
-                   sim.start, sim.seed)
+    def from_config(cls, sim: FrameSimOptions) -> FrameSimOptions:
+        """The frame options alone of ``sim`` (a :class:`gyrostand.config.SimulateConfig`,
+        which extends these options with the truth)."""
+        return cls(**{f.name: getattr(sim, f.name) for f in fields(cls)})
 
 
 @dataclass
@@ -151,6 +153,8 @@ def generate_frames(db: Database, channels: ChannelMap, truths: Sequence[Truth],
         raise ValueError("all truths must share one time grid")
     step = float(t[1] - t[0]) if t.size > 1 else 1.0
     span = float(t[-1] - t[0]) + step
+    from gyrostand.can.bus import FrameEncoder  # here: the options load light (the config's)
+
     rng = np.random.default_rng(opts.seed)
     enc = FrameEncoder(db)
     streams = _streams(channels, opts)

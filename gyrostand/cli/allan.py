@@ -11,12 +11,12 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..core.names import VOCABULARY
+from ..plugins import available_terms
 from ..runfolder.layout import RESULT
 from .common import add_format_args, emit
 
 if TYPE_CHECKING:
-    from ..core.allan import AllanTable
+    from ..core.diagnose.allan import AllanTable
     from ..workbench import Subject
 
 log = logging.getLogger(__name__)
@@ -30,7 +30,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     p.add_argument("--model", default=None,
                    help="thermal model of the residual (comma-separated terms of: "
-                        f"{', '.join(VOCABULARY)}); default the run's current model")
+                        f"{', '.join(available_terms())}); default the run's current model")
     p.add_argument("--unit", default=None,
                    help="the drift's unit (default: the DBC signal's unit from the run's "
                         "session file, else 'y'); deg/h and deg/s add deg/√h, deg/h/√h")
@@ -55,8 +55,8 @@ def _drift_unit(subject: Subject) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.ml import ml
-    from ..render.views import AllanView
+    from ..core.ml.fit import ml
+    from ..report.views import AllanView
     from ..workbench import open_subject
 
     subject = open_subject(args.run, gyro=args.gyro, model=args.model)
@@ -67,9 +67,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def render(tables: list[AllanTable], gyro: str, dt: float) -> str:
-    """The tables as text (:func:`gyrostand.render.text.allan`)."""
-    from ..render.text import allan
-    from ..render.views import AllanView
+    """The tables as text (:func:`gyrostand.report.text.allan`)."""
+    from ..report.text import allan
+    from ..report.views import AllanView
 
     raw, resid = tables
     return allan(AllanView(gyro, "", raw.unit, dt, (), raw.level, raw, resid))

@@ -10,8 +10,9 @@ import sys
 import time
 from typing import Any
 
-from ..core.names import METHODS, VOCABULARY
+from ..core.names import METHODS
 from ..errors import ConfigError
+from ..plugins import available_terms
 from .common import number
 
 
@@ -42,7 +43,7 @@ def add_parser(sub: Any) -> None:
                         "diagnose (default identify,diagnose)")
     p.add_argument("--model", default=None,
                    help="fit this model (comma-separated terms) to every run instead of "
-                        f"each gyro's current one; of: {', '.join(VOCABULARY)}")
+                        f"each gyro's current one; of: {', '.join(available_terms())}")
     p.add_argument("--method", choices=sorted(METHODS), default="ml",
                    help="identifier of the identify step (default ml; diagnose always "
                         "fits by ML)")

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, TextIO
 
-from ..render import FORMATS
+from ..report import FORMATS
 
 if TYPE_CHECKING:
     from ..config import SessionConfig
@@ -93,8 +93,8 @@ def add_format_args(p: Any, what: str = "the result", default: str = FORMATS[0],
 
 
 def emit(obj: Any, format: str, out: TextIO | None = None) -> None:
-    """Print ``obj`` rendered in ``format`` (:mod:`gyrostand.render`)."""
-    from ..render import render
+    """Print ``obj`` rendered in ``format`` (:mod:`gyrostand.report`)."""
+    from ..report import render
 
     (out or sys.stdout).write(render(obj, format))
 
@@ -109,7 +109,7 @@ def print_outcome(outcome: RunOutcome, out: TextIO,
                   truths: dict[str, dict[str, float]] | None = None,
                   format: str = "text") -> None:
     """The final table of every gyro, the counts, and the paths."""
-    from ..render.views import RunSummary
+    from ..report.views import RunSummary
 
     emit(RunSummary(outcome, truths or {}), format, out)
 

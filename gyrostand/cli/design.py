@@ -14,8 +14,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..core.names import VOCABULARY
+from ..plugins import available_terms
 from .common import number
+from .design_program import limits_of, program_document, program_lines, write_files
 
 
 def add_parser(sub: Any) -> None:
@@ -28,7 +29,7 @@ def add_parser(sub: Any) -> None:
                         "parameters, and its own record is the reference (optional)")
     p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     p.add_argument("--model", default=None,
-                   help=f"comma-separated terms of: {', '.join(VOCABULARY)} (default: the "
+                   help=f"comma-separated terms of: {', '.join(available_terms())} (default: the "
                         "run's current model)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter's current value (e.g. temp_rate.k=5); every parameter "
@@ -98,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design import case_temperature, design
+    from ..core.design.search import case_temperature, design
     from ..core.model import Model
     from ..errors import ModelError
 
@@ -109,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         return run_separate(args, given)
     reference_record = None
     if args.run is not None:
-        from ..core.ml import ml
+        from ..core.ml.fit import ml
         from ..workbench import open_subject
 
         subject = open_subject(args.run, gyro=args.gyro, model=args.model)
@@ -133,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
                      maxfev=args.evaluations, seed=args.seed, progress=bar.update)
     ref_label = "standard cycle"
     if reference_record is not None:
-        from ..core.fisher import crlb
+        from ..core.design.fisher import crlb
 
         t, temp = reference_record
         res.reference_predicted = crlb(model, params, t, temp, dt=float(np.median(np.diff(t))),
@@ -182,87 +183,13 @@ def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
     }
 
 
-def program_document(program, limits) -> dict[str, Any]:
-    """design.json's ``limits`` and ``program``."""
-    return {
-        "limits": {"t_min": limits.t_min, "t_max": limits.t_max,
-                   "max_rate_degC_per_min": limits.max_rate * 60.0,
-                   "min_soak_s": limits.min_soak, "duration_s": limits.duration,
-                   "legs": limits.legs, "lag_s": limits.lag, "start": limits.t0},
-        "program": [{"target_degC": T, "rate_degC_per_min": r * 60.0, "soak_s": s}
-                    for T, r, s in program.legs],
-    }
-
-
-def limits_of(args: argparse.Namespace, hours: float):
-    """The chamber limits of the command line (°C/min and min converted to SI)."""
-    from ..core.design import ChamberLimits
-
-    return ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
-                         hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
-                         start=args.start)
-
-
-def write_files(out: Path, program, goal: str, limits, case, ref_case, reference_record,
-                 ref_label: str, title: str) -> None:
-    import numpy as np
-
-    rows = program.rows()
-    with open(out / "program.csv", "w", encoding="utf-8", newline="") as fh:
-        fh.write("time_s,setpoint_degC\n")
-        for t, T in rows:
-            fh.write(f"{t:.1f},{T:.3f}\n")
-    grid = limits.grid
-    sp = program.setpoint(limits.duration)(grid)
-    with open(out / "profile.csv", "w", encoding="utf-8", newline="") as fh:
-        fh.write("t,setpoint_degC,case_degC\n")
-        for k in range(grid.size):
-            fh.write(f"{grid[k]:g},{sp[k]:.4f},{case[k]:.4f}\n")
-    # the simulator's profile: the case temperature's breakpoints (every minute with a lag)
-    if limits.lag > 0:
-        idx = np.unique(np.concatenate([np.arange(0, grid.size, 60), [grid.size - 1]]))
-        pts = [[float(grid[i]), round(float(case[i]), 4)] for i in idx]
-    else:
-        pts = [[round(t, 1), round(T, 4)] for t, T in rows]
-    lines = ["# gyrostand design: paste into a session file's simulate: section to rehearse",
-             f"# the designed run ({goal}); the case temperature the model sees.",
-             "simulate:", f"  duration: {limits.duration:g}", "  temperature:"]
-    lines += [f"    - [{t:g}, {T:g}]" for t, T in pts]
-    (out / "simulate.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    _plot(out / "design.png", grid, sp, case, ref_case, reference_record, ref_label, title)
-
-
-def _plot(path: Path, grid, sp, case, ref_case, reference_record, ref_label, title) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4))
-    h = grid / 3600.0
-    ax.plot(h, sp, lw=1.0, color="C0", ls="--", label="designed set-point")
-    ax.plot(h, case, lw=1.6, color="C0", label="designed, case")
-    if reference_record is not None:
-        ax.plot(reference_record[0] / 3600.0, reference_record[1], lw=1.2, color="C1",
-                label=ref_label)
-    else:
-        ax.plot(h, ref_case, lw=1.2, color="C1", label=ref_label)
-    ax.set_title(title)
-    ax.set_xlabel("time, h")
-    ax.set_ylabel("temperature, °C")
-    ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-
-
 def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[str, Any]:
     """Realized std of ML over ``n`` simulated runs on each profile."""
     import numpy as np
 
     from .. import progress
-    from ..core.ml import ml
-    from ..core.simulate import simulate
+    from ..core.ml.fit import ml
+    from ..core.simulation import simulate
 
     out: dict[str, Any] = {"runs": n}
     for label, (t, temp) in (("designed", (limits.grid, case)), ("reference", reference)):
@@ -286,21 +213,6 @@ def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[s
                                        for k, v in est.items()},
                       "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}
     return out
-
-
-def program_lines(goal: str, res, limits) -> list[str]:
-    """The header (goal, evaluations, limits) and the designed program's legs."""
-    lines = [f"design ({goal}; {res.evaluations} evaluations), "
-             f"{limits.duration / 3600:g} h, {limits.t_min:g}..{limits.t_max:g} °C, "
-             f"≤ {limits.max_rate * 60:g} °C/min, soaks ≥ {limits.min_soak / 60:g} min, "
-             f"lag {limits.lag / 60:g} min",
-             "", f"program (from {res.program.start:.1f} °C):"]
-    if res.program is res.reference:
-        lines.insert(1, "no program better than the reference was found: it is proposed")
-    for j, (T, r, s) in enumerate(res.program.legs, 1):
-        lines.append(f"  leg {j}: ramp at {r * 60:.3g} °C/min to {T:.1f} °C, soak "
-                     f"{s / 60:.1f} min")
-    return lines
 
 
 def render(res, limits, ref_label: str, verify, out: Path) -> str:

@@ -1,5 +1,5 @@
 """``gyrostand design ... --separate A B``: the chamber program that best tells the
-look-alike terms A and B apart (:mod:`gyrostand.core.separation`), its files (those of
+look-alike terms A and B apart (:mod:`gyrostand.core.design.separation`), its files (those of
 ``design``), the expected likelihood ratio on it beside the reference's, and ``--verify``."""
 
 from __future__ import annotations
@@ -11,16 +11,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .design import limits_of, program_document, program_lines, write_files
+from .design_program import limits_of, program_document, program_lines, write_files
 
 
 def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design import case_temperature, standard_cycle
-    from ..core.model import Model
-    from ..core.separation import (
+    from ..core.design.search import case_temperature, standard_cycle
+    from ..core.design.separation import (
         Rivals,
         rival_models,
         rivals,
@@ -28,7 +27,8 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
         time_only,
         verify,
     )
-    from ..core.switch_ons import separate_switch_ons, switch_on_records
+    from ..core.design.switch_ons import separate_switch_ons, switch_on_records
+    from ..core.model import Model
     from ..errors import ModelError
 
     a, b = args.separate
@@ -36,7 +36,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
     spread = _spread(args, given)
     reference_record = None
     if args.run is not None:
-        from ..core.ml import ml
+        from ..core.ml.fit import ml
         from ..workbench import open_subject
 
         subject = open_subject(args.run, gyro=args.gyro, model=args.model)
@@ -69,7 +69,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
                             unit="splits") as bar:
             res.switch_ons = separate_switch_ons(riv, limits, progress=bar.update)
         if spread is not None:
-            from ..core.switch_ons import SPREADS, separate_power_cycle
+            from ..core.design.switch_ons import SPREADS, separate_power_cycle
 
             with progress.stage("design", f"power cycles: {a} vs {b}, sigma_b {spread:g}",
                                 total=None, unit="protocols") as bar:
@@ -99,7 +99,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
             res.verify = verify(riv, records, args.verify, seed=args.seed,
                                 progress=bar.update)
         if pcr is not None:
-            from ..core.switch_ons import verify_protocol
+            from ..core.design.switch_ons import verify_protocol
 
             with progress.stage("design", "verify the power cycle", total=2 * args.verify,
                                 unit="sets") as bar:
@@ -273,8 +273,8 @@ def write_power_cycle(out: Path, pcr, limits) -> None:
     """power_cycle.csv (time / set-point / power of the whole protocol, off periods held
     at the next run's start temperature) and simulate_power_cycle.yaml (one ``simulate:``
     document per switch-on, its program)."""
-    from ..core.design import standard_cycle
-    from ..core.switch_ons import run_limits_of
+    from ..core.design.search import standard_cycle
+    from ..core.design.switch_ons import run_limits_of
 
     pc = pcr.best
     docs = []

@@ -9,8 +9,8 @@ from .common import add_format_args, emit
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
-    from ..core.candidates import Report
-    from ..core.prederror import ModelError
+    from ..core.diagnose.prederror import ModelError
+    from ..core.diagnose.results import Report
 
 
 def add_parser(sub: Any) -> None:
@@ -24,7 +24,7 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import progress
-    from ..render.views import AllanView, DiagnosisView
+    from ..report.views import AllanView, DiagnosisView
     from ..workbench import run_diagnose
 
     if len(args.run) > 1:
@@ -43,14 +43,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def render(rep: Report, source: str) -> str:
-    """The diagnosis as text (:func:`gyrostand.render.text.diagnosis`)."""
-    from ..render.text import diagnosis
+    """The diagnosis as text (:func:`gyrostand.report.text.diagnosis`)."""
+    from ..report.text import diagnosis
 
     return diagnosis(rep, source)
 
 
 def render_model_error(err: ModelError) -> list[str]:
-    """The model error's lines of the text (:func:`gyrostand.render.text.model_error`)."""
-    from ..render.text import model_error
+    """The model error's lines of the text (:func:`gyrostand.report.text.model_error`)."""
+    from ..report.text import model_error
 
     return model_error(err)

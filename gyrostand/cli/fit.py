@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from ..core.names import VOCABULARY
+from ..plugins import available_terms
 from .common import add_format_args, emit
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
@@ -17,7 +17,7 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser("fit", help="add or remove model terms, refit, show before/after "
                                    "(several runs of one gyro: jointly)")
     add_subject_args(p, several=True)
-    terms = ", ".join(VOCABULARY)
+    terms = ", ".join(available_terms())
     p.add_argument("--add", action="append", default=[], metavar="TERM",
                    help=f"add a model term (repeatable); one of: {terms}")
     p.add_argument("--remove", action="append", default=[], metavar="TERM",
@@ -27,7 +27,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render.views import FitStepView
+    from ..report.views import FitStepView
     from ..workbench import run_fit
 
     if len(args.run) > 1:
@@ -45,8 +45,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def render(step: FitStep) -> str:
-    """The step as text (:func:`gyrostand.render.text.fit_step`)."""
-    from ..render.text import fit_step
-    from ..render.views import FitStepView
+    """The step as text (:func:`gyrostand.report.text.fit_step`)."""
+    from ..report.text import fit_step
+    from ..report.views import FitStepView
 
     return fit_step(FitStepView(step))

@@ -8,8 +8,9 @@ import dataclasses
 from typing import Any
 
 from ..core import registry
-from ..core.names import LKF_VARIANTS, METHODS, VOCABULARY
+from ..core.names import LKF_VARIANTS, METHODS
 from ..errors import ConfigError
+from ..plugins import available_terms
 from .common import add_format_args, emit, number
 
 DEFAULT_MODEL = "markov,temp,bias"
@@ -30,7 +31,7 @@ def add_parser(sub: Any) -> None:
                         "Kalman filter), ml (exact maximum likelihood; default)")
     p.add_argument("--model", default=DEFAULT_MODEL,
                    help=f"comma-separated model terms (default {DEFAULT_MODEL}) of: "
-                        f"{', '.join(VOCABULARY)}; 'white' measurement noise is always "
+                        f"{', '.join(available_terms())}; 'white' measurement noise is always "
                         "included")
     p.add_argument("--sigma", type=number(positive=True), default=None,
                    help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = Model.parse(args.model)
     if len(args.samples) > 1:
-        from ..core.multirun import joint_ml
+        from ..core.ml.joint import joint_ml
 
         if args.method != "ml":
             raise ConfigError(f"several runs are identified jointly by ml only (--method "

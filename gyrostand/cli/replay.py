@@ -55,9 +55,9 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..config import load_config
-    from ..render.views import RunSummary
+    from ..report.views import RunSummary
+    from ..runfolder import raw_segments
     from ..session.offline import run_replays
-    from ..session.outputs import raw_segments
     from .common import emit
 
     cfg = with_data_formats(load_config(args.config), args)

@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     from ..session.offline import simulated_frames
 
     cfg = load_config(args.config)
-    if cfg.simulate is None:
+    sim = cfg.simulate
+    if sim is None:
         raise ConfigError(f"{args.config}: simulate: missing (the simulator needs it)")
     path = args.log
     if args.out_deprecated is not None:
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {n} frames to {path}")
         return 0
     cfg = with_bus_overrides(cfg, args)
-    realtime = cfg.simulate.realtime if args.realtime is None else args.realtime
+    realtime = sim.realtime if args.realtime is None else args.realtime
     bus = open_bus(cfg.bus)
     try:
         n = send_frames(bus, frames, realtime=realtime, speed=args.speed)

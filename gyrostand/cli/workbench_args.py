@@ -60,7 +60,7 @@ def check_run_folder(path: Path) -> None:
 
 def fmt_estimate(value: float, std: float, unit: str, fixed: bool = False,
                  drift_unit: str = "y") -> str:
-    """``value ± std unit`` (:func:`gyrostand.render.text.estimate`)."""
-    from ..render.text import estimate
+    """``value ± std unit`` (:func:`gyrostand.report.text.estimate`)."""
+    from ..report.text import estimate
 
     return estimate(value, std, unit, fixed, drift_unit)

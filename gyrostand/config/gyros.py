@@ -12,11 +12,12 @@ from gyrostand.core import registry
 from gyrostand.core.names import LKF_VARIANTS
 from gyrostand.errors import CanEdgeError
 
+from .reader import Reader
 from .schema import (
-    _NAME_RE,
-    _PARAM_RE,
     IDENTIFIERS,
     MATCHES,
+    NAME_RE,
+    PARAM_RE,
     RESULT_SIGNALS,
     SUMMARY_SIGNALS,
     ChannelConfig,
@@ -27,7 +28,7 @@ from .schema import (
 )
 
 
-class GyroSections:
+class GyroSections(Reader):
     """Mixin of :class:`~gyrostand.config.parser.Parser`: the ``gyros:`` entries."""
 
     def channel(self, value: Any, path: str) -> ChannelConfig:
@@ -65,12 +66,12 @@ class GyroSections:
         m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
                          ("identifiers", "result", "lkf"))
         name = self.string(m["name"], f"{path}.name")
-        if not _NAME_RE.match(name):
+        if not NAME_RE.match(name):
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         drift = self.channel(m["drift"], f"{path}.drift")
         temp = self.channel(m["temperature"], f"{path}.temperature")
         model = self.names(m["model"], f"{path}.model", self.terms)
-        self.model_of(model, f"{path}.model")
+        core_model = self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
                             IDENTIFIERS)
         # an identifier needing a term the model lacks (lkf linearises the markov state's
@@ -87,6 +88,19 @@ class GyroSections:
                         "identifies this gyro (at the end of the run)",
                         self.source, path, ", ".join(model), term, " and ".join(need))
             idents = tuple(i for i in idents if i not in need)
+        # every identifier left checks the model as it would at its first bin (the lsq of a
+        # model with temp_lag, the lkf of a term without a causal regressor): refused here,
+        # naming the term, not at every bin of the run
+        for ident in idents:
+            why = registry.get(ident).refusal(core_model)
+            if why is None:
+                continue
+            if "identifiers" in m:
+                raise self.fail(f"{path}.identifiers", f"{ident} cannot identify this model: "
+                                f"{why}")
+            log.warning("%s: %s: %s cannot identify the model (%s): %s; the others do",
+                        self.source, path, ident, ", ".join(model), why)
+            idents = tuple(i for i in idents if i != ident)
         result = None
         if m.get("result") is not None:
             r = self.mapping(m["result"], f"{path}.result", ("message",), ("summary",))
@@ -126,7 +140,7 @@ class GyroSections:
         names = self.model_of(model, path).param_names
         held: dict[str, float] = {}
         for k, v in held_raw.items():
-            mt = _PARAM_RE.match(str(k))
+            mt = PARAM_RE.match(str(k))
             if not mt or mt.group(1) not in model:
                 raise self.fail(f"{path}.held.{k}", "expected '<term>.<param>' of a term in "
                                                     "this gyro's model")
@@ -144,19 +158,10 @@ class GyroSections:
         every = None if every is None else self.integer(every, f"{path}.relinearize_every",
                                                         1, 10_000_000)
         soaked = bool(self.boolean(m.get("soaked", True), f"{path}.soaked"))
-        return LkfConfig(held=MappingProxyType(held), warmup=warmup, iterate=iterate,
-                         variant=variant, relinearize_every=every, soaked=soaked, **vals)
-
-    def model_of(self, model: tuple[str, ...], path: str) -> Any:
-        """The core :class:`~gyrostand.core.model.Model` of ``model`` (a ConfigError at
-        ``path`` when the terms do not make one, so no run folder is started for it)."""
-        from gyrostand.core.model import Model
-        from gyrostand.errors import ModelError
-
-        try:
-            return Model.parse(list(model))
-        except ModelError as exc:
-            raise self.fail(path, str(exc)) from None
+        return LkfConfig(beta0=vals["beta0"], gamma0=vals["gamma0"], b0=vals["b0"],
+                         sigma=vals["sigma"], white_sigma=vals["white_sigma"],
+                         held=MappingProxyType(held), warmup=warmup, iterate=iterate,
+                         variant=variant, relinearize_every=every, soaked=soaked)
 
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         """A drift signal belongs to one gyro; a temperature signal may serve several (one

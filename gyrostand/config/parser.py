@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -10,14 +9,12 @@ from typing import Any
 
 import yaml
 
-from gyrostand.can.codes import check_width, role_codes
-from gyrostand.can.dbc import MessageRef, find_message, load_dbc
+from gyrostand.can.dbc import MessageRef, load_dbc
 from gyrostand.errors import CanEdgeError, ConfigError
 from gyrostand.runfolder.layout import DATA_FORMATS
 
 from .gyros import GyroSections
 from .schema import (
-    _NAME_RE,
     ACK_SIGNALS,
     COMMAND_SIGNALS,
     MATCHES,
@@ -25,16 +22,15 @@ from .schema import (
     MAX_EPOCH,
     MAX_GAP_BINS,
     MIN_DT,
-    MODEL_TERMS,
+    NAME_RE,
     STATUS_SIGNALS,
     GyroConfig,
     ReconnectConfig,
     ResponsesConfig,
     SamplingConfig,
     SessionConfig,
-    _clip,
-    _join,
-    _kind,
+    clip,
+    kind_of,
 )
 from .simulate import SimulateSection
 
@@ -50,7 +46,7 @@ def load_config(path: str | Path) -> SessionConfig:
     try:
         data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {_clip(str(exc), 600)}") from exc
+        raise ConfigError(f"{path}: invalid YAML: {clip(str(exc), 600)}") from exc
     return parse_config(data, source=path, base_dir=path.resolve().parent)
 
 
@@ -87,7 +83,7 @@ class _StrictLoader(yaml.SafeLoader):
         if self.check_event(yaml.AliasEvent):
             ev = self.peek_event()
             raise yaml.composer.ComposerError(
-                None, None, f"aliases (*{_clip(str(ev.anchor), 40)}) are not accepted in a "
+                None, None, f"aliases (*{clip(str(ev.anchor), 40)}) are not accepted in a "
                 "session file: write the value out", ev.start_mark)
         return super().compose_node(parent, index)
 
@@ -103,7 +99,7 @@ class _StrictLoader(yaml.SafeLoader):
             if dup:
                 raise yaml.constructor.ConstructorError(
                     "while constructing a mapping", node.start_mark,
-                    f"duplicate key {_clip(repr(key), 60)}", key_node.start_mark)
+                    f"duplicate key {clip(repr(key), 60)}", key_node.start_mark)
         return super().construct_mapping(node, deep)
 
 
@@ -114,124 +110,9 @@ def parse_config(data: Any, source: str | Path = "<config>",
 
 
 class _Parser(GyroSections, SimulateSection):
-    """The validating parser: helpers and the top-level sections (gyro and simulate
-    sections in their mixins)."""
+    """The validating parser: the top-level sections (the primitives in
+    :class:`~.reader.Reader`, the gyro and simulate sections in their mixins)."""
 
-    def __init__(self, source: str, base_dir: Path) -> None:
-        self.source = source
-        self.base = base_dir
-        self.db: Any = None
-        self.dbc_name = "DBC"
-        self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
-        self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
-        self.match = "id"  # the session's default channel `match` once parsed
-
-    # -- helpers ---------------------------------------------------------------------
-    def fail(self, path: str, msg: str) -> ConfigError:
-        return ConfigError(f"{self.source}: {_clip(path, 200)}: {_clip(msg, 600)}")
-
-    def mapping(self, value: Any, path: str, required: tuple[str, ...],
-                optional: tuple[str, ...]) -> dict[str, Any]:
-        if not isinstance(value, Mapping):
-            raise self.fail(path, f"expected a mapping, got {_kind(value)}")
-        unknown = [k for k in value if k not in required and k not in optional]
-        if unknown:
-            allowed = ", ".join(required + optional)
-            raise self.fail(_join(path, str(unknown[0])),
-                            f"unknown key (allowed here: {allowed})")
-        for k in required:
-            if k not in value:
-                raise self.fail(_join(path, k), "missing required key")
-        return dict(value)
-
-    def number(self, value: Any, path: str, *, lo: float | None = None,
-               hi: float | None = None, lo_open: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(path, f"expected a number, got {_kind(value)}")
-        try:
-            x = float(value)
-        except OverflowError:
-            raise self.fail(path, f"too large ({len(str(abs(value)))}-digit integer)") from None
-        if not math.isfinite(x):
-            raise self.fail(path, f"must be finite, got {value!r}")
-        if lo is not None and (x < lo or (lo_open and x == lo)):
-            raise self.fail(path, f"must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
-        if hi is not None and x > hi:
-            raise self.fail(path, f"must be <= {hi:g}, got {value!r}")
-        return x
-
-    def integer(self, value: Any, path: str, lo: int | None = None,
-                hi: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(path, f"expected an integer, got {_kind(value)}")
-        if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise self.fail(path, f"must be in [{lo}, {hi}], got {value}")
-        return value
-
-    def string(self, value: Any, path: str) -> str:
-        if not isinstance(value, str) or not value:
-            raise self.fail(path, f"expected a non-empty string, got {_kind(value)}")
-        return value
-
-    def names(self, value: Any, path: str, vocabulary: tuple[str, ...]) -> tuple[str, ...]:
-        if isinstance(value, str):
-            value = [v.strip() for v in value.split(",")]
-        if not isinstance(value, list) or not value:
-            raise self.fail(path, f"expected a non-empty list, got {_kind(value)}")
-        out: list[str] = []
-        for i, v in enumerate(value):
-            if v not in vocabulary:
-                raise self.fail(f"{path}[{i}]", f"{v!r} is not one of: {', '.join(vocabulary)}")
-            if v in out:
-                raise self.fail(f"{path}[{i}]", f"{v!r} is listed twice")
-            out.append(v)
-        return tuple(out)
-
-    def message(self, value: Any, path: str) -> MessageRef:
-        ref, extended = value, None
-        if isinstance(value, Mapping):
-            m = self.mapping(value, path, ("message",), ("extended",))
-            ref, extended = m["message"], self.boolean(m.get("extended"), f"{path}.extended")
-            path = f"{path}.message"
-        try:
-            return find_message(self.db, ref, extended, source=self.dbc_name)[0]
-        except CanEdgeError as exc:
-            raise self.fail(path, str(exc)) from None
-
-    def boolean(self, value: Any, path: str) -> bool | None:
-        if value is None or isinstance(value, bool):
-            return value
-        raise self.fail(path, f"expected true or false, got {_kind(value)}")
-
-    def require_signals(self, ref: MessageRef, path: str, needed: tuple[str, ...],
-                        role: str | None = None) -> None:
-        """``ref`` must carry the signals ``needed``; for a message of the daemon's in
-        ``role`` (``result``, ``summary``, ``status``, ``ack``, ``command``) also the value
-        tables of its codes (:func:`gyrostand.can.codes.role_codes`)."""
-        msg = self.db.get_message_by_name(ref.name)
-        have = {s.name for s in msg.signals}
-        missing = [s for s in needed if s not in have]
-        if missing:
-            raise self.fail(path, f"message {ref.name} lacks signal(s) {', '.join(missing)} "
-                                  f"needed here (see dbc/README.md)")
-        if role is not None:
-            try:
-                role_codes(msg, role, self.dbc_name)
-            except CanEdgeError as exc:
-                raise self.fail(path, str(exc)) from None
-
-    def require_width(self, ref: MessageRef, path: str, model: tuple[str, ...]) -> None:
-        """The summary's ``ModelTerms`` must have a bit for every term of ``model``."""
-        from gyrostand.can.bus import model_terms_mask
-
-        try:
-            check_width(self.db.get_message_by_name(ref.name), "ModelTerms",
-                        model_terms_mask(model), f"the model {', '.join(model)}",
-                        self.dbc_name)
-        except CanEdgeError as exc:
-            raise self.fail(path, str(exc)) from None
-
-    # -- sections --------------------------------------------------------------------
     def session(self, data: Any) -> SessionConfig:
         top = self.mapping(data, "<top>", ("session", "bus", "dbc", "gyros"),
                            ("sampling", "responses", "simulate", "reconnect", "match",
@@ -242,7 +123,7 @@ class _Parser(GyroSections, SimulateSection):
         sess = self.mapping(top["session"], "session", ("name",),
                             ("output", "fsync", "formats"))
         name = self.string(sess["name"], "session.name")
-        if not _NAME_RE.match(name):
+        if not NAME_RE.match(name):
             raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
         output = (self.base / self.string(sess.get("output", "runs"), "session.output")).resolve()
         fsync = bool(self.boolean(sess.get("fsync", True), "session.fsync"))
@@ -254,7 +135,7 @@ class _Parser(GyroSections, SimulateSection):
                 raise self.fail("session.formats", missing)
         bus = top["bus"]
         if not isinstance(bus, Mapping) or not bus:
-            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {_kind(bus)}")
+            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {kind_of(bus)}")
         if "interface" not in bus:
             raise self.fail("bus.interface", "missing required key")
         self.string(bus["interface"], "bus.interface")
@@ -268,7 +149,7 @@ class _Parser(GyroSections, SimulateSection):
         self.terms = self.plugins(top.get("plugins"))
         gyros_raw = top["gyros"]
         if not isinstance(gyros_raw, list) or not gyros_raw:
-            raise self.fail("gyros", f"expected a non-empty list, got {_kind(gyros_raw)}")
+            raise self.fail("gyros", f"expected a non-empty list, got {kind_of(gyros_raw)}")
         gyros = tuple(self.gyro(g, f"gyros[{i}]") for i, g in enumerate(gyros_raw))
         seen: dict[str, int] = {}
         for i, g in enumerate(gyros):
@@ -301,7 +182,7 @@ class _Parser(GyroSections, SimulateSection):
             raise self.fail("plugins", str(exc)) from None
         mods = [] if value is None else value
         if not isinstance(mods, list) or not all(isinstance(m, str) and m for m in mods):
-            raise self.fail("plugins", f"expected a list of module names, got {_kind(value)}")
+            raise self.fail("plugins", f"expected a list of module names, got {kind_of(value)}")
         for i, m in enumerate(mods):
             try:
                 load_modules([m])

@@ -10,9 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from gyrostand.can.dbc import MessageRef, SignalRef
+from gyrostand.can.framesim import FrameSimOptions
 from gyrostand.core import registry
 from gyrostand.core.names import VOCABULARY
-from gyrostand.core.registry import LkfOptions
+from gyrostand.core.options import LkfOptions
 
 log = logging.getLogger(__name__)
 
@@ -29,8 +30,10 @@ STATUS_SIGNALS = ("Page", "Counter", "State", "Bins", "Gaps", "FramesDecoded",
 COMMAND_SIGNALS = ("Command", "Sequence")
 ACK_SIGNALS = ("Command", "Sequence", "Result", "Reason")
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-_PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
+#: a session's and a gyro's name: a letter or digit, then letters, digits, ``_.-``
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+#: a parameter's name ``<term>.<param>``: groups (term, param)
+PARAM_RE = re.compile(r"^([a-z_0-9]+)\.([A-Za-z_][A-Za-z_0-9]*)$")
 MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 1000.0
 #: bounds of sampling.dt (s): frames at up to 1000 Hz in bins of at least 10 ms, at most 1 h
 MIN_DT, MAX_DT = 0.01, 3600.0
@@ -63,7 +66,7 @@ class ResultConfig:
 
 
 #: The online LKF of a gyro (its ``lkf:`` section): the lkf identifier's typed options
-#: (:class:`~gyrostand.core.registry.LkfOptions`; a value left out is estimated from a
+#: (:class:`~gyrostand.core.options.LkfOptions`; a value left out is estimated from a
 #: warm-up of ``warmup`` bins).
 LkfConfig = LkfOptions
 
@@ -137,25 +140,19 @@ class SimGyroConfig:
     params: Mapping[str, float]
 
 
-@dataclass(frozen=True)
-class SimulateConfig:
-    """Stand simulator: temperature breakpoints ``(t s, T degC)``, linear between; frame
-    rates (Hz); uniform timestamp jitter half-width (s); drop probability; sensor
-    quantization step (physical units, 0 = only the DBC's resolution); ``start`` absolute
-    timestamp of t = 0 (s since the Unix epoch: BLF stores absolute time)."""
+@dataclass(frozen=True, kw_only=True)
+class SimulateConfig(FrameSimOptions):
+    """Stand simulator: the frame simulator's options (its fields, owned by
+    :class:`~gyrostand.can.framesim.FrameSimOptions`: frame rates (Hz), uniform timestamp
+    jitter half-width (s), drop probability, sensor quantization steps (physical units,
+    0 = only the DBC's resolution), ``start`` absolute timestamp of t = 0 (s since the Unix
+    epoch: BLF stores absolute time), ``seed``, also of the truth) and the truth: the
+    temperature breakpoints ``(t s, T degC)``, linear between, each gyro's true model,
+    the ``duration`` (s; default the last breakpoint's time), ``realtime`` pacing."""
 
     temperature: tuple[tuple[float, float], ...]
     gyros: Mapping[str, SimGyroConfig]
-    seed: int = 0
-    start: float = 1_700_000_000.0
     duration: float | None = None
-    drift_rate: float = 100.0
-    temperature_rate: float = 10.0
-    interpolation: str = "hold"
-    jitter: float = 0.0
-    drop: float = 0.0
-    drift_quantization: float = 0.0
-    temperature_quantization: float = 0.0
     realtime: bool = False
 
 
@@ -188,19 +185,22 @@ class SessionConfig:
         raise KeyError(name)
 
 
-
-def _join(path: str, key: str) -> str:
+def key_path(path: str, key: str) -> str:
+    """The key path of ``key`` inside ``path`` (``"<top>"``: the file's top level), as
+    error messages name it: ``sampling.dt``."""
     return key if path == "<top>" else f"{path}.{key}"
 
 
-def _kind(value: Any) -> str:
+def kind_of(value: Any) -> str:
+    """What ``value`` is, as an error message says it was given: ``nothing``, a mapping
+    or list by its type, anything else by its type and (clipped) value."""
     if value is None:
         return "nothing"
-    return f"{type(value).__name__} {_clip(repr(value), 80)}" if not isinstance(
+    return f"{type(value).__name__} {clip(repr(value), 80)}" if not isinstance(
         value, (dict, list)) else type(value).__name__
 
 
-def _clip(text: str, n: int) -> str:
+def clip(text: str, n: int) -> str:
     """``text`` cut to ``n`` characters (an error message quotes input, never all of it)."""
     return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
 

@@ -6,17 +6,18 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
+from .reader import Reader
 from .schema import (
-    _PARAM_RE,
     MAX_EPOCH,
     MAX_RATE_HZ,
     MIN_RATE_HZ,
+    PARAM_RE,
     SimGyroConfig,
     SimulateConfig,
 )
 
 
-class SimulateSection:
+class SimulateSection(Reader):
     """Mixin of :class:`~gyrostand.config.parser.Parser`: ``simulate:``."""
 
     def simulate(self, value: Any, gyro_names: list[str]) -> SimulateConfig:
@@ -68,7 +69,7 @@ class SimulateSection:
                                   else ())
             vals: dict[str, float] = {}
             for k, v in params.items():
-                mt = _PARAM_RE.match(str(k))
+                mt = PARAM_RE.match(str(k))
                 if not mt or mt.group(1) not in self.terms:
                     raise self.fail(f"{q}.params.{k}", "expected '<term>.<param>' with a term "
                                     f"of: {', '.join(self.terms)}")

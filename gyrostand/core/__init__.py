@@ -8,6 +8,13 @@
 >>> sorted(r.parameters) == sorted(m.param_names)
 True
 
+Subpackages, each with its public modules: :mod:`.terms` (the model terms), :mod:`.ml`
+(exact maximum likelihood, one run and several), :mod:`.lkf` (the paper's linearised
+Kalman filter), :mod:`.lsq` (the paper's least squares), :mod:`.diagnose` (where a model
+fails, which effect is missing), :mod:`.design` (the next chamber run). Beside them the
+shared foundations: :mod:`.names`, :mod:`.data`, :mod:`.profiles`, :mod:`.model`,
+:mod:`.results`, :mod:`.kalman`, :mod:`.registry` (the identifiers), :mod:`.simulation`.
+
 The names below are imported on first use (PEP 562): ``import gyrostand.core`` (or any
 of its light submodules, e.g. :mod:`gyrostand.core.names`) costs no scipy.stats and no
 numba, so the command line starts fast.
@@ -15,66 +22,34 @@ numba, so the command line starts fast.
 
 from __future__ import annotations
 
-import importlib
-import sys
-import types
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from .lazy import exports
 
 if TYPE_CHECKING:
-    from .candidates import Report, diagnose
     from .data import Samples
-    from .fisher import crlb
-    from .identify import IDENTIFIERS, identify
-    from .lkf import OnlineLKF, lkf
-    from .lsq import OnlineLSQ, lsq
-    from .ml import ml
+    from .design.fisher import crlb
+    from .diagnose.results import Report
+    from .lkf.filter import OnlineLKF
+    from .lsq.fit import OnlineLSQ
     from .model import Model
     from .profiles import TemperatureProfile, chamber_profile, paper_profile
+    from .registry import REGISTRY, identify
     from .results import Estimate, FitResult
-    from .simulate import simulate
+    from .simulation import simulate
 
 #: each public name and the submodule that defines it
-_SOURCES: dict[str, str] = {
-    "Report": "candidates", "diagnose": "candidates", "Samples": "data", "crlb": "fisher",
-    "IDENTIFIERS": "identify", "identify": "identify", "OnlineLKF": "lkf", "lkf": "lkf",
-    "OnlineLSQ": "lsq", "lsq": "lsq", "ml": "ml", "Model": "model",
-    "TemperatureProfile": "profiles", "chamber_profile": "profiles",
-    "paper_profile": "profiles", "Estimate": "results", "FitResult": "results",
-    "simulate": "simulate",
+EXPORTS: dict[str, str] = {
+    "Report": "diagnose.results", "Samples": "data", "crlb": "design.fisher",
+    "REGISTRY": "registry", "identify": "registry", "OnlineLKF": "lkf.filter",
+    "OnlineLSQ": "lsq.fit", "Model": "model", "TemperatureProfile": "profiles",
+    "chamber_profile": "profiles", "paper_profile": "profiles", "Estimate": "results",
+    "FitResult": "results", "simulate": "simulation",
 }
 
 __all__ = [
-    "IDENTIFIERS", "Estimate", "FitResult", "Model", "OnlineLKF", "OnlineLSQ", "Report",
-    "Samples", "TemperatureProfile", "chamber_profile", "crlb", "diagnose", "identify", "lkf",
-    "lsq", "ml", "paper_profile", "simulate",
+    "REGISTRY", "Estimate", "FitResult", "Model", "OnlineLKF", "OnlineLSQ", "Report",
+    "Samples", "TemperatureProfile", "chamber_profile", "crlb", "identify", "paper_profile",
+    "simulate",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the submodule defining ``name`` on first access, and keep the value."""
-    try:
-        source = _SOURCES[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(f".{source}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
-
-
-class _Core(types.ModuleType):
-    """Importing a submodule binds it on its package (``gyrostand.core.ml`` = the module);
-    where the package exports a function of the submodule's name (``identify``, ``lkf``,
-    ``lsq``, ``ml``, ``simulate``), the package's attribute stays that function, as it was
-    when this package imported everything eagerly."""
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if isinstance(value, types.ModuleType) and _SOURCES.get(name) == name:
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Core
+__getattr__, __dir__ = exports(__name__, EXPORTS, globals())

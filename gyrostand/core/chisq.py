@@ -1,4 +1,5 @@
-"""The χ² distribution's tail and quantile, from scipy.special (not scipy.stats).
+"""The χ² distribution's tail and quantile, from scipy.special (not scipy.stats), and
+the Ljung–Box whiteness test it calibrates (:func:`ljung_box`).
 
 scipy.stats costs ~0.6–1 s to import (its whole distribution zoo); the tests of the core
 need only two functions of one distribution (and the tail of a χ² process's supremum,
@@ -15,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 from scipy.special import chdtrc, gammaincinv
 
 
@@ -57,3 +59,19 @@ def sup_chi2_sf(x: float, df: int, lkc: Sequence[float]) -> float:
     if len(lkc) > 2:
         raise ValueError(f"sup_chi2_sf: a shape of {len(lkc)} dimensions (at most 2)")
     return float(min(max(p, 0.0), 1.0))
+
+
+def ljung_box(z: np.ndarray, lags: int) -> tuple[float, float]:
+    """Ljung–Box Q statistic of ``z`` (NaN skipped) for ``lags`` lags, and its p-value.
+
+    Q = n(n+2) Σ_{k=1..h} ρ_k² / (n − k),  Q ~ χ²(h) for white noise.
+    """
+    z = z[np.isfinite(z)]
+    n = z.size
+    z = z - z.mean()
+    d = float(z @ z)
+    if n <= lags + 1 or d == 0:
+        return 0.0, 1.0
+    rho = np.array([float(z[k:] @ z[:-k]) / d for k in range(1, lags + 1)])
+    q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
+    return q, chi2_sf(q, lags)

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import ModelError
 from .data import Samples
 from .kalman import kf_innovations
-from .terms import TERMS, Context, Param, Term
+from .terms.builtin import TERMS, Context, Param, Term
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -82,6 +82,12 @@ class Model:
     def names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.terms)
 
+    @cached_property
+    def modifiers(self) -> tuple[Term, ...]:
+        """The terms that change the temperature driving the others' inputs (``temp_lag``),
+        in the model's order: what its :class:`~.terms.base.Context` applies."""
+        return tuple(t for t in self.terms if t.role == "modifier")
+
     def __contains__(self, name: object) -> bool:
         return name in self.names
 
@@ -126,7 +132,7 @@ class Model:
 
     @cached_property
     def defaults(self) -> dict[str, float]:
-        """The default of every shape parameter (:class:`~gyrostand.core.term_base.Param`'s
+        """The default of every shape parameter (:class:`~gyrostand.core.terms.base.Param`'s
         ``default``: the term's plain shape), for a simulation or a filter not given it."""
         return {t.key(q.name): float(q.default) for t in self.terms for q in t.params
                 if q.default is not None}
@@ -165,6 +171,7 @@ class Model:
     def regressors(self, p: Mapping[str, float], ctx: Context) -> np.ndarray:
         """Regressor matrix, shape (N, n_linear), columns in ``names_of_kind('linear')``."""
         cols: dict[str, np.ndarray] = {}
+        ctx = ctx.bound(self.modifiers)
         for t in self.terms:
             cols.update(t.regressors(p, ctx))
         lin = self.names_of_kind("linear")
@@ -199,8 +206,7 @@ class Model:
     def innovations(self, p: Mapping[str, float], samples: Samples):
         """One-step innovations ``e`` and their variances ``f`` at the parameters ``p``."""
         self.check_params(p)
-        ctx = context(samples)
-        X = self.regressors(p, ctx)
+        X = self.regressors(p, context(samples, self))
         E, f = self.filter_columns(p, samples, X)
         theta = np.array([p[n] for n in self.names_of_kind("linear")])
         e = E[:, 0] - E[:, 1:] @ theta if theta.size else E[:, 0].copy()
@@ -215,5 +221,9 @@ class Model:
         return float(-0.5 * np.sum(LOG_2PI + np.log(f[ok]) + e[ok] ** 2 / f[ok]))
 
 
-def context(samples: Samples) -> Context:
-    return Context(t=np.asarray(samples.t), temp=np.asarray(samples.temp), dt=samples.dt)
+def context(samples: Samples, model: Model | None) -> Context:
+    """What ``model``'s terms need from ``samples`` (:class:`~.terms.base.Context`), its
+    modifier terms included; ``model=None`` for what needs the data alone (the temperature
+    rate, the segments): a term's input then refuses (it cannot know the modifiers)."""
+    return Context(t=np.asarray(samples.t), temp=np.asarray(samples.temp), dt=samples.dt,
+                   modifiers=model.modifiers if model is not None else None)

@@ -3,7 +3,7 @@ vocabulary and the identifiers. Pure Python, so that building the ``gyrostand`` 
 parser (and validating a session file's ``model:``) costs no numpy/scipy/numba import.
 
 :mod:`gyrostand.core.terms` maps each vocabulary name to its term class and
-:mod:`gyrostand.core.identify` each method name to its function (tests check both match).
+:mod:`gyrostand.core.registry` each method name to its function (tests check both match).
 """
 
 from __future__ import annotations

@@ -21,17 +21,31 @@ Traceback (most recent call last):
 gyrostand.errors.ModelError: lsq has no option beta0; its options: regressor, sigma
 >>> names()
 ('lkf', 'lsq', 'ml')
+
+:func:`identify` is the keyword form of ``get(method).fit(samples, model,
+get(method).options(**options))``: the options are checked against the identifier's typed
+options class (an unknown one is a :class:`~gyrostand.errors.ModelError` naming it).
+
+>>> from gyrostand.core.model import Model
+>>> from gyrostand.core.profiles import paper_profile
+>>> from gyrostand.core.simulation import simulate
+>>> m = Model.parse("markov,temp")
+>>> s = simulate(m, {"markov.beta": 0.0333, "markov.sigma": 0.1, "temp.gamma": -0.01,
+...                  "white.sigma": 0.0}, paper_profile(), seed=1)
+>>> r = identify(s, m, "ml", sigma=0.1)
+>>> abs(r.value("markov.beta") / 0.0333 - 1) < 0.15
+True
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import fields, replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from ..errors import ModelError
-from .names import LKF_VARIANTS
+from .options import LkfOptions, LsqOptions, MlOptions
 
 if TYPE_CHECKING:
     from .data import Samples
@@ -39,109 +53,7 @@ if TYPE_CHECKING:
     from .results import FitResult
     from .tracking import LkfPoint, OnlineTrack
 
-__all__ = ["Identifier", "LkfOptions", "LsqOptions", "MlOptions", "REGISTRY", "get", "names",
-           "LSQ_REGRESSORS"]
-
-#: least squares' regressor: Y_{k-1} (standard) or Y_k (the paper's text)
-LSQ_REGRESSORS = ("previous", "current")
-
-
-def _frozen_mapping(obj: Any, name: str) -> None:
-    value = getattr(obj, name)
-    if value is not None:
-        object.__setattr__(obj, name, MappingProxyType(dict(value)))
-
-
-@dataclass(frozen=True)
-class LsqOptions:
-    """``regressor``: ``previous`` (Y_{k−1}) or ``current`` (Y_k); ``sigma`` fixes
-    ``markov.sigma`` in the report (the regression does not use it)."""
-
-    regressor: str = "previous"
-    sigma: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.regressor not in LSQ_REGRESSORS:
-            raise ModelError(f"regressor must be 'previous' or 'current', got "
-                             f"{self.regressor!r}")
-
-
-@dataclass(frozen=True)
-class LkfOptions:
-    """The LKF's options, batch and online (a session file's ``lkf:`` section).
-
-    ``beta0`` (1/s), ``gamma0`` (drift unit per s·degC), ``b0`` (drift unit): the
-    linearisation point; ``sigma`` (``markov.sigma``) and ``white_sigma`` (``white.sigma``)
-    the held noise levels (drift unit); ``held`` any further held parameter by name (e.g.
-    ``random_walk.q``). A value left out (None) is estimated: batch from a fit of the record
-    (the paper variant: the paper's point 1e-4 for β₀, γ₀), online from a *warm-up* of the
-    first ``warmup`` bins (least squares for the point, the core's held-value estimate for
-    the noise levels), after which the filter starts and replays those bins.
-
-    ``variant``: ``relin`` (the converging filter of :mod:`~gyrostand.core.lkf_relin`,
-    online re-linearised every ``relinearize_every`` bins, default 100 s of bins, noise
-    levels not given re-estimated) or ``paper`` (the paper's single pass at a fixed point;
-    ``iterate`` re-linearises its batch run until it settles, at most ``max_iter`` passes,
-    relative tolerance ``tol``). ``soaked``: start the moving point in equilibrium with the
-    first temperature (relin). ``prior_std``: the initial state stds by state name.
-    """
-
-    beta0: float | None = None
-    gamma0: float | None = None
-    b0: float | None = None
-    sigma: float | None = None
-    white_sigma: float | None = None
-    held: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
-    warmup: int = 300
-    iterate: bool = False
-    variant: str = "relin"
-    relinearize_every: int | None = None
-    soaked: bool = True
-    max_iter: int = 60
-    tol: float = 1e-4
-    prior_std: Mapping[str, float] | None = None
-
-    def __post_init__(self) -> None:
-        if self.variant not in LKF_VARIANTS:
-            raise ModelError(f"unknown lkf variant {self.variant!r}; choose one of "
-                             f"{', '.join(LKF_VARIANTS)}")
-        object.__setattr__(self, "held", MappingProxyType(dict(self.held or {})))
-        _frozen_mapping(self, "prior_std")
-
-    @property
-    def needs_warmup(self) -> bool:
-        """Whether the online filter needs a warm-up fit (a point or level left out)."""
-        return None in (self.beta0, self.gamma0, self.b0, self.sigma, self.white_sigma)
-
-    @property
-    def given(self) -> dict[str, float]:
-        """The held values given: ``held`` with ``sigma`` and ``white_sigma`` by name."""
-        out = dict(self.held)
-        if self.sigma is not None:
-            out["markov.sigma"] = self.sigma
-        if self.white_sigma is not None:
-            out["white.sigma"] = self.white_sigma
-        return out
-
-
-@dataclass(frozen=True)
-class MlOptions:
-    """``sigma`` fixes ``markov.sigma``; ``fixed`` holds parameters at values; ``n_local``
-    local optimisations from the best grid starts (None: 2, or 5 with several rates);
-    ``start`` an extra start point; ``std_errors`` from ``hessian_passes`` numerical
-    Hessians of the log-likelihood (see :func:`~gyrostand.core.ml.ml_fit`)."""
-
-    sigma: float | None = None
-    fixed: Mapping[str, float] | None = None
-    n_local: int | None = None
-    start: Mapping[str, float] | None = None
-    std_errors: bool = True
-    hessian_passes: int = 2
-
-    def __post_init__(self) -> None:
-        _frozen_mapping(self, "fixed")
-        _frozen_mapping(self, "start")
-
+__all__ = ["Identifier", "REGISTRY", "get", "identify", "names"]
 
 class Identifier:
     """Base of the identifiers; a subclass sets the class attributes and :meth:`fit`."""
@@ -225,12 +137,12 @@ class Lsq(Identifier):
     help = "the paper's least squares"
 
     def check(self, model: Model) -> None:
-        from .lsq import check_lsq_model
+        from .lsq.fit import check_lsq_model
 
         check_lsq_model(model)  # names the term, and says why (it needs markov, too)
 
     def fit(self, samples: Samples, model: Model, options: Any = None) -> FitResult:
-        from .lsq import lsq
+        from .lsq.fit import lsq
 
         o = self._typed(options)
         return lsq(samples, model, regressor=o.regressor, sigma=o.sigma)
@@ -250,12 +162,12 @@ class Lkf(Identifier):
     help = "its linearized Kalman filter"
 
     def check(self, model: Model) -> None:
-        from .lkf import lkf_layout
+        from .lkf.filter import lkf_layout
 
         lkf_layout(model)  # names the term (it needs markov, too)
 
     def fit(self, samples: Samples, model: Model, options: Any = None) -> FitResult:
-        from .lkf import lkf
+        from .lkf.filter import lkf
 
         o = self._typed(options)
         held = dict(o.held)
@@ -291,7 +203,7 @@ class Ml(Identifier):
     help = "exact maximum likelihood"
 
     def fit(self, samples: Samples, model: Model, options: Any = None) -> FitResult:
-        from .ml import ml
+        from .ml.fit import ml
 
         o = self._typed(options)
         return ml(samples, model, sigma=o.sigma, fixed=o.fixed, n_local=o.n_local,
@@ -315,3 +227,10 @@ def get(name: str) -> Identifier:
 def names() -> tuple[str, ...]:
     """Every identifier's name."""
     return tuple(REGISTRY)
+
+
+def identify(samples: Samples, model: Model, method: str, **options: Any) -> FitResult:
+    """Fit ``model`` to ``samples`` with ``method`` (a name of the registry: ``lsq``,
+    ``lkf`` or ``ml``) and its options by keyword."""
+    ident = get(method)
+    return ident.fit(samples, model, ident.options(**options))

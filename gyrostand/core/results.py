@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -12,29 +11,9 @@ from typing import Any
 import numpy as np
 
 from .model import Model
+from .summary import DRIFT_UNIT, UNIT_TEXT, fit_table, unit_text
 
-UNIT_TEXT = {"y": "y", "1/s": "1/s", "y/(s*degC)": "y/(s·°C)", "y/sqrt(s)": "y/√s"}
-
-#: the drift's unit when nothing names it (a CSV without ``--unit``)
-DRIFT_UNIT = "y"
-
-
-def unit_text(unit: str, drift: str = DRIFT_UNIT) -> str:
-    """A parameter's unit as printed, the drift's unit in place of ``y``.
-
-    >>> unit_text("y/(s*degC)", "deg/h")
-    '(deg/h)/(s·°C)'
-    >>> unit_text("y*s/degC", "deg/h"), unit_text("y", "deg/h"), unit_text("1/s", "deg/h")
-    ('(deg/h)·s/°C', 'deg/h', '1/s')
-    """
-    d = drift or DRIFT_UNIT
-    if unit == "y":
-        return d
-    if "/" in d or "*" in d or " " in d:
-        d = f"({d})"
-    out = re.sub(r"\by\b", lambda _: d, unit)
-    return (out.replace("sqrt(s)", "√s").replace("degC", "°C").replace("^2", "²")
-            .replace("*", "·"))
+__all__ = ["Estimate", "FitResult", "DRIFT_UNIT", "UNIT_TEXT", "unit_text"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +26,13 @@ class Estimate:
     fixed: bool = False
 
     def to_dict(self) -> dict[str, Any]:
+        """``{"value", "std"}``, and ``"fixed": true`` for a held value.
+
+        >>> Estimate(1.5, 0.25, "y").to_dict()
+        {'value': 1.5, 'std': 0.25}
+        >>> Estimate(2.0, 0.0, "1/s", fixed=True).to_dict()
+        {'value': 2.0, 'std': 0.0, 'fixed': True}
+        """
         d: dict[str, Any] = {"value": float(self.value), "std": float(self.std)}
         if self.fixed:
             d["fixed"] = True
@@ -147,27 +133,22 @@ class FitResult:
             d["parameter_units"] = {k: unit_text(e.unit, self.unit)
                                     for k, e in self.parameters.items()}
         d["warnings"] = list(self.warnings)
-        d["info"] = {k: v for k, v in self.info.items() if _jsonable(v)}
+        d["info"] = {k: v for k, v in self.info.items() if jsonable(v)}
         return d
 
     def summary(self) -> str:
-        """A readable table with units (:func:`gyrostand.render.text.fit_result`).
-
-        The text renderer lives a layer above the core: imported when called (by name, so
-        that neither loading the core nor type-checking it pulls the upper layers in)."""
-        import importlib
-
-        text = importlib.import_module("gyrostand.render.text")
-        return str(text.fit_result(self))
+        """A readable table with units (:func:`gyrostand.core.summary.fit_table`, which
+        ``identify``'s text renderer prints too)."""
+        return fit_table(self)
 
 
-def _jsonable(v: Any) -> bool:
+def jsonable(v: Any) -> bool:
     if isinstance(v, bool | int | str) or v is None:
         return True
     if isinstance(v, float):
         return math.isfinite(v)
     if isinstance(v, list | tuple):
-        return all(_jsonable(x) for x in v)
+        return all(jsonable(x) for x in v)
     if isinstance(v, dict):
-        return all(isinstance(k, str) and _jsonable(x) for k, x in v.items())
+        return all(isinstance(k, str) and jsonable(x) for k, x in v.items())
     return False

@@ -36,12 +36,12 @@ from scipy.special import gammaincinv
 
 from ..errors import GyrostandError
 from .data import Samples
-from .lkf import OnlineLKF, held_names, held_values, lkf_layout, relin_fit
-from .lkf_relin import RelinLKF
-from .lsq import OnlineLSQ
-from .lsq import solve as lsq_solve
+from .lkf.filter import OnlineLKF, held_names, held_values, lkf_layout, relin_fit
+from .lkf.relin import RelinLKF
+from .lsq.fit import OnlineLSQ, lsq
+from .lsq.fit import solve as lsq_solve
 from .model import Model
-from .registry import LkfOptions, LsqOptions, get
+from .options import LkfOptions, LsqOptions
 from .results import Estimate, FitResult
 
 __all__ = ["OnlineEstimate", "OnlineTrack", "LkfPoint", "LkfTrack", "LsqTrack",
@@ -82,7 +82,7 @@ class OnlineTrack(Protocol):
 @dataclass(frozen=True)
 class LkfPoint:
     """A resolved LKF setting: linearisation point and held values (``held`` has every
-    name of :func:`~gyrostand.core.lkf.held_names`); ``source`` says where they came from."""
+    name of :func:`~gyrostand.core.lkf.filter.held_names`); ``source`` says where they came from."""
 
     beta0: float
     gamma0: float
@@ -108,12 +108,14 @@ def resolve_lkf_point(model: Model, cfg: LkfOptions, samples: Samples | None) ->
         if samples is None:
             raise GyrostandError("lkf: no data yet for the warm-up fit")
         if need_point:
+            from .ml.fit import ml  # (numba: only when a warm-up needs it)
+
             try:
-                fit = get("lsq").fit(samples, model)
+                fit = lsq(samples, model)
                 if not fit.value("markov.beta") > 0:  # no mean reversion seen by lsq
                     raise GyrostandError("lsq beta <= 0")
             except GyrostandError:
-                fit = get("ml").fit(samples, model, get("ml").options(std_errors=False))
+                fit = ml(samples, model, std_errors=False)
             for k in need_point:
                 point[k] = fit.value(k)
             source = f"{fit.method} fit of {samples.n_observed} bins"
@@ -156,10 +158,10 @@ def _nis_band(n: int) -> tuple[float, float]:
 class LkfTrack:
     """The online LKF of one gyro: warm-up, then the configured variant bin by bin.
 
-    ``relin`` (default): :class:`~gyrostand.core.lkf_relin.RelinLKF`, re-linearised every
+    ``relin`` (default): :class:`~gyrostand.core.lkf.relin.RelinLKF`, re-linearised every
     ``lkf.relinearize_every`` bins (default 100 s of bins), held noise levels not given in
     the session file re-estimated at each re-linearisation. ``paper``: the paper's single
-    pass (:class:`~gyrostand.core.lkf.OnlineLKF`) at the warm-up point.
+    pass (:class:`~gyrostand.core.lkf.filter.OnlineLKF`) at the warm-up point.
 
     Status (:meth:`estimate`): ``failed`` when the filter's innovations are grossly
     inconsistent (mean e²/f over the last ``NIS_WINDOW`` bins > ``NIS_FAIL``) or not finite;
@@ -394,7 +396,7 @@ class LkfTrack:
 @dataclass
 class LsqTrack:
     """Online least squares of one gyro: the statistics updated per bin, solved on demand
-    (:meth:`estimate`); equal to the batch :func:`~gyrostand.core.lsq.lsq` on the same bins
+    (:meth:`estimate`); equal to the batch :func:`~gyrostand.core.lsq.fit.lsq` on the same bins
     to rounding."""
 
     model: Model

@@ -4,7 +4,7 @@ candidates), in ``report-<gyro>-joint/`` beside the first run. The HTML page add
 figures the single-run report shows where they make sense for several runs: each run's
 measured drift with the joint open-loop model (stacked), the per-run biases with their
 intervals and the repeatability, each run's residual check, and the ranked candidates —
-drawn by :mod:`.figures`, written beside the page (or embedded: ``single_file``) as
+drawn by :mod:`.joint_figures`, written beside the page (or embedded: ``single_file``) as
 :mod:`.page` writes the single-run report's."""
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..core.diagnose.joint import WHITE_ALPHA, JointDiagnosis
 from ..core.model import context
-from ..core.multirun import WHITE_ALPHA, JointDiagnosis
-from ..render import render
-from ..render.views import Plot
+from ..runfolder import write_atomic
 from ..workbench import Subject
 from ..workbench.joint import run_joint_diagnose
-from . import figures
-from .page import DOCUMENTS, PAGE, _atomic, default_dir, draw_plots
+from . import joint_figures, render
+from .page import DOCUMENTS, PAGE, default_dir, draw_plots
+from .views import Plot
 
 __all__ = ["write_joint_report", "joint_plots"]
 
@@ -42,7 +42,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
     titles = []
     for r, (s, run) in enumerate(zip(samples, fit.runs, strict=True)):
         p = run.values
-        X = model.regressors(p, context(s))
+        X = model.regressors(p, context(s, model))
         det = X @ np.array([p[k] for k in lin]) if lin else np.zeros(len(s))
         dets.append(det)
         err = np.asarray(s.drift) - det
@@ -59,7 +59,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
               "(orange: the shared coefficients with the run's own bias and warm-up; what a "
               "thermal compensation built from the joint model would remove); temperature "
               "in red on the right axis. A run the shared physics does not fit stands out."),
-         lambda: figures.joint_measured_vs_model(samples, dets, model.names, rep.unit,
+         lambda: joint_figures.joint_measured_vs_model(samples, dets, model.names, rep.unit,
                                                  titles)),
     ]
     if fit.repeatability is not None:
@@ -73,7 +73,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
             "the estimation errors (REML), the bias repeatability, whose Q-profile interval "
             "is in the title. Biases that differ by far more than their intervals are a "
             "real turn-on-to-turn-on spread."),
-            lambda: figures.joint_biases(rp, [s.source for s in samples], rep.unit)))
+            lambda: joint_figures.joint_biases(rp, [s.source for s in samples], rep.unit)))
     alpha = WHITE_ALPHA / max(len(fit.runs), 1)
     plots.append((Plot(
         FIGURES[2],
@@ -82,7 +82,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
         f"the dashed line (p = {alpha:.2g}, Bonferroni over the runs) is a run the joint "
         "model leaves structure in. Bottom: the mean squared standardized innovation (NIS) "
         "with ±2 standard errors; 1 when the predicted variances are right."),
-        lambda: figures.joint_residual_checks(fit, alpha)))
+        lambda: joint_figures.joint_residual_checks(fit, alpha)))
     plots.append((Plot(
         FIGURES[3],
         "The missing effects ranked by their joint likelihood ratio, with the critical "
@@ -91,7 +91,7 @@ def joint_plots(subjects: Sequence[Subject], rep: JointDiagnosis
         "counted once per run): its likelihood ratio against the current model, best first, "
         f"and a tick at its χ² critical value at {rep.alpha:g} (Bonferroni over the "
         "candidates). Orange: significant on the runs together; grey: not identified."),
-        lambda: figures.joint_candidates(rep.candidates, rep.alpha)))
+        lambda: joint_figures.joint_candidates(rep.candidates, rep.alpha)))
     return plots
 
 
@@ -100,7 +100,7 @@ def write_joint_report(subjects: Sequence[Subject], out_dir: str | Path | None =
     """Diagnose the runs jointly (no ledger step: a report only reads) and write the
     document in ``format`` (HTML: with the figures of :func:`joint_plots`, beside the page
     or, with ``single_file``, embedded in it); return its path."""
-    from ..render.html import e, figure, page
+    from .html import e, figure, page
 
     if format != "html" and format not in DOCUMENTS:
         raise ValueError(f"unknown report format {format!r}")
@@ -112,16 +112,16 @@ def write_joint_report(subjects: Sequence[Subject], out_dir: str | Path | None =
     if format != "html":
         doc = render(rep, format)
         path = out / DOCUMENTS[format]
-        _atomic(path, lambda fh: fh.write(doc.encode("utf-8")))
+        write_atomic(path, doc, sync=True)
         return path
     plots = joint_plots(subjects, rep)
     drawn = draw_plots(plots, out, single_file)
-    from ..render.text import joint_diagnosis
+    from .text import joint_diagnosis
 
     title = f"gyrostand report: {first.gyro}, {len(subjects)} runs (joint)"
     body = (f"<h1>{e(title)}</h1><pre>{e(joint_diagnosis(rep))}</pre>"
             + "<h2>Figures</h2>" + "".join(figure(p) for p in drawn))
     html = page(title, body)
     path = out / PAGE
-    _atomic(path, lambda fh: fh.write(html.encode("utf-8")))
+    write_atomic(path, html, sync=True)
     return path

@@ -1,5 +1,5 @@
 """The HTML report: its figures drawn and written, then the page (the HTML renderer's
-:func:`gyrostand.render.html.report_page`, from templates), into one self-contained folder.
+:func:`gyrostand.report.html.report_page`, from templates), into one self-contained folder.
 
 ::
 
@@ -21,23 +21,21 @@ import dataclasses
 import datetime as _dt
 import io
 import logging
-import os
 import struct
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from .. import __version__, progress
-from ..core.candidates import Report
+from ..core.diagnose.results import Report
 from ..core.model import context
-from ..render import render
-from ..render.views import AllanView, Plot, ReportPage
+from ..runfolder import write_atomic
 from ..workbench import Subject, run_diagnose
-from . import figures
+from . import figures, render
 from .series import convergence, ledger_points, ledger_steps
+from .views import AllanView, Plot, ReportPage
 
 log = logging.getLogger(__name__)
 
@@ -82,10 +80,10 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
         doc = render(ReportPage(subject, rep, (), ledger_steps(subject), "", now,
                                 __version__, allan), format)
         path = out / DOCUMENTS[format]
-        _atomic(path, lambda fh: fh.write(doc.encode("utf-8")))
+        write_atomic(path, doc, sync=True)
         return path
     s = subject.samples
-    ctx = context(s)
+    ctx = context(s, rep.model)
     p = rep.fit.values
     lin = rep.model.names_of_kind("linear")
     X = rep.model.regressors(p, ctx)
@@ -156,26 +154,16 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     page = render(ReportPage(subject, rep, drawn, steps, conv_source, now, __version__,
                              allan), "html")
     path = out / PAGE
-    _atomic(path, lambda fh: fh.write(page.encode("utf-8")))
+    write_atomic(path, page, sync=True)
     log.info("report written to %s", path)
     return path
 
 
-def _png(fig: Figure) -> Callable[[IO[bytes]], Any]:
-    return lambda fh: fig.savefig(fh, format="png", dpi=DPI)
-
-
-def _atomic(path: Path, write: Callable[[IO[bytes]], Any]) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with tmp.open("wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+def png_bytes(fig: Figure) -> bytes:
+    """``fig`` drawn as a PNG (Agg, at :data:`DPI`)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
 
 
 def png_size(path: Path) -> tuple[int, int]:
@@ -202,15 +190,13 @@ def draw_plots(plots, out: Path, single_file: bool) -> list:
     with progress.stage("report", "figures", total=len(plots), unit="figures") as bar:
         for plot, make in plots:
             fig = make()
+            png = png_bytes(fig)
             if single_file:
-                buf = io.BytesIO()
-                _png(fig)(buf)
-                png = buf.getvalue()
                 drawn.append(dataclasses.replace(plot, size=png_header_size(png), src=(
                     "data:image/png;base64," + base64.b64encode(png).decode("ascii"))))
                 (out / plot.file).unlink(missing_ok=True)  # an earlier folder report's
             else:
-                _atomic(out / plot.file, _png(fig))
+                write_atomic(out / plot.file, png, sync=True)
                 drawn.append(dataclasses.replace(plot, size=png_size(out / plot.file)))
             bar.update()
     return drawn

@@ -21,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from ..core.candidates import Report, fit_error
 from ..core.data import Samples
-from ..core.lkf import estimated_names, held_names, lkf, lkf_layout
-from ..core.ml import ml
+from ..core.diagnose.candidates import fit_error
+from ..core.diagnose.results import Report
+from ..core.lkf.filter import estimated_names, held_names, lkf, lkf_layout
+from ..core.ml.fit import ml
 from ..errors import GyrostandError
 from ..runfolder import estimates_path, read_estimates_csv, read_result_or_none
 from ..workbench import Subject, read_ledger

@@ -44,6 +44,8 @@ from .layout import (
 from .records import (
     RunLog,
     SegmentLog,
+    finite,
+    json_safe,
     read_result,
     read_result_or_none,
     read_segments,
@@ -65,7 +67,8 @@ __all__ = ["append_line", "cut_torn_tail", "datasync", "read_lines", "read_text"
            "write_atomic", "ESTIMATES", "LEDGER", "LOCK", "RAW_LOG", "REPORT", "RESULT",
            "RUN_LOG", "SAMPLES", "SEGMENTS_FILE", "SNAPSHOT", "RunLock", "check_writable",
            "csv_ledger_path", "estimates_path", "latest_run_dir", "make_run_dir",
-           "next_raw_segment", "raw_segments", "samples_path", "RunLog", "SegmentLog",
+           "next_raw_segment", "raw_segments", "samples_path", "RunLog", "SegmentLog", "finite",
+           "json_safe",
            "read_result", "read_result_or_none", "read_segments", "write_json",
            "SAMPLES_COLUMNS", "CommittedCSV", "EstimatesWriter", "SamplesWriter",
            "cut_estimates_after", "estimate_columns", "read_estimates_csv", "read_header",

@@ -2,7 +2,8 @@
 
 * **Rewritten files** (``result.json``, ``report.txt``, ``snapshot.json``,
   ``segments.json``) go through :func:`write_atomic`: a temporary file beside the target,
-  renamed over it, so a reader sees the old or the new file, never half of one.
+  renamed over it, so a reader sees the old or the new file, never half of one (the
+  report's page and figures and the fleet table too).
 * **Growing files** (``samples.csv``, ``estimates.csv``, ``ledger.jsonl``) are appended a
   whole line at a time, each line ending in ``\\n``. A process killed (or a disk filled)
   in the middle of an append leaves a *torn* last line: the text after the last line end.
@@ -37,14 +38,19 @@ def datasync(fd: int) -> None:
     getattr(os, "fdatasync", os.fsync)(fd)
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, then rename it over ``path``.
+def write_atomic(path: Path, data: str | bytes, *, sync: bool = False) -> None:
+    """Write ``data`` (text, written as UTF-8, or bytes) to a temporary file beside
+    ``path``, then rename it over ``path``; with ``sync`` the data is on the disk
+    (:func:`datasync`) before the rename, so the new file survives a power cut too.
     Raises :class:`OutputError` naming ``path`` (the old file, if any, is left intact)."""
+    raw = data.encode("utf-8") if isinstance(data, str) else data
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        with tmp.open("w", encoding="utf-8") as fh:
-            fh.write(text)
+        with tmp.open("wb") as fh:
+            fh.write(raw)
             fh.flush()
+            if sync:
+                datasync(fh.fileno())
         os.replace(tmp, path)
     except OSError as exc:
         try:

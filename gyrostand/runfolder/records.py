@@ -12,7 +12,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,7 @@ from ..errors import DataError
 from .files import read_text, write_atomic
 from .layout import RESULT, RUN_LOG, SEGMENTS_FILE
 
-__all__ = ["write_json", "read_result", "read_result_or_none", "SegmentLog",
+__all__ = ["write_json", "finite", "json_safe", "read_result", "read_result_or_none", "SegmentLog",
            "read_segments", "RunLog"]
 
 log = logging.getLogger(__name__)
@@ -31,6 +31,24 @@ def write_json(path: Path, doc: Any, *, indent: int = 2, allow_nan: bool = False
     (:func:`~gyrostand.runfolder.files.write_atomic`). Raises :class:`OutputError`;
     ``ValueError`` for a NaN or infinity unless ``allow_nan``."""
     write_atomic(path, json.dumps(doc, indent=indent, allow_nan=allow_nan) + "\n")
+
+
+def finite(x: float) -> float | None:
+    """``x`` as a JSON number: a float, or None (``null``) when it is NaN or infinite."""
+    return float(x) if math.isfinite(x) else None
+
+
+def json_safe(x: Any) -> Any:
+    """``x`` with every float :func:`finite` (nested mappings, with string keys, and
+    sequences as lists): what ``result.json``'s counts and every document printing them
+    hold, strict JSON with no NaN."""
+    if isinstance(x, float):
+        return finite(x)
+    if isinstance(x, Mapping):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    return x
 
 
 def read_result(run_dir: str | Path) -> dict[str, Any]:

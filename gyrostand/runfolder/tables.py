@@ -223,10 +223,14 @@ def read_samples_csv(path: str | Path) -> dict[str, list[float]]:
 # -- estimates.csv --------------------------------------------------------------------------
 
 class Estimate(Protocol):
-    """What a row is made of (:class:`~gyrostand.session.online.OnlineEstimate`)."""
+    """What a row is made of (:class:`~gyrostand.core.tracking.OnlineEstimate`): read-only
+    ``values`` (parameter name -> (value, std)) and ``status``."""
 
-    values: Any  # parameter name -> (value, std)
-    status: str
+    @property
+    def values(self) -> Any: ...
+
+    @property
+    def status(self) -> str: ...
 
 
 def estimate_columns(identifiers: Sequence[str], param_names: Sequence[str]) -> list[str]:

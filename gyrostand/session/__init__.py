@@ -12,5 +12,5 @@
 - :mod:`~gyrostand.session.offline`: ``gyrostand replay``; the simulator's truth and frames.
 - :mod:`~gyrostand.session.online`: per-gyro online LKF/LSQ.
 - :mod:`~gyrostand.session.final`: final batch fits, ``result.json``, ``report.txt``.
-- :mod:`~gyrostand.session.outputs`: the run folder, ``run.log``, ``estimates.csv``.
+- the run folder, ``run.log``, ``estimates.csv``: :mod:`gyrostand.runfolder`.
 """

@@ -2,7 +2,7 @@
 
 Per gyro ``samples.csv`` (the closed bins, :class:`~gyrostand.can.binning.SamplesWriter`)
 and ``estimates.csv`` (the online estimates after each bin,
-:class:`~gyrostand.session.outputs.EstimatesWriter`), plus ``snapshot.json`` on command.
+:class:`~gyrostand.runfolder.EstimatesWriter`), plus ``snapshot.json`` on command.
 Rows wait in memory until :meth:`AckedFiles.flush`, which first commits the raw log
 (``before_flush``, the live daemon's recorder), then the bins, then the estimates: a row
 on disk is *acknowledged*, the raw log replays to it.
@@ -19,11 +19,11 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from ..can.binning import Bin, SamplesWriter
+from ..can.binning import Bin
 from ..errors import OutputError
+from ..runfolder import EstimatesWriter, SamplesWriter, write_atomic
 from ..runfolder.layout import ESTIMATES, SNAPSHOT
 from .online import GyroTracker
-from .outputs import EstimatesWriter, write_atomic
 from .resume import ResumeState
 
 __all__ = ["AckedFiles", "SNAPSHOT_FILE"]

@@ -38,7 +38,7 @@ from ..core.model import Model
 from ..core.registry import REGISTRY
 from ..core.results import FitResult
 from ..errors import GyrostandError
-from ..runfolder import write_atomic, write_json
+from ..runfolder import finite, json_safe, write_atomic, write_json
 from .online import LkfPoint, OnlineEstimate
 
 __all__ = ["GyroFinal", "fit_gyro", "write_result_json", "write_report", "final_methods",
@@ -75,11 +75,11 @@ class GyroFinal:
         fits = {m: (f.to_dict() if isinstance(f, FitResult) else {"error": f})
                 for m, f in self.fits.items()}
         online = {e.identifier: {
-            "status": e.status, "samples": e.samples, "residual_rms": _finite(e.residual_rms),
+            "status": e.status, "samples": e.samples, "residual_rms": finite(e.residual_rms),
             "note": e.note,
-            "parameters": {k: {"value": _finite(v), "std": _finite(s)}
+            "parameters": {k: {"value": finite(v), "std": finite(s)}
                            for k, (v, s) in e.values.items()}} for e in self.online}
-        return {"model": list(self.model.names), "t0": _finite(self.t0), "bins": self.bins,
+        return {"model": list(self.model.names), "t0": finite(self.t0), "bins": self.bins,
                 "gaps": self.gaps, "observed": self.observed, "fits": fits, "online": online}
 
 
@@ -151,7 +151,7 @@ def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path
     doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
            "run_dir": str(run_dir), "dt": cfg.sampling.dt,
            "epoch": cfg.sampling.epoch, "state": "finished",
-           "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": _clean(stats)}
+           "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": json_safe(stats)}
     write_json(path, doc)
 
 
@@ -171,8 +171,8 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
 
 def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> str:
     """One gyro's parameters: a column per method (value ± std), truth first if known
-    (:func:`gyrostand.render.text.result_table`)."""
-    from ..render.text import result_table as table
+    (:func:`gyrostand.report.text.result_table`)."""
+    from ..report.text import result_table as table
 
     return table(final, truth)
 
@@ -180,22 +180,8 @@ def result_table(final: GyroFinal, truth: Mapping[str, float] | None = None) -> 
 def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[GyroFinal],
                  stats: Mapping[str, Any], truths: Mapping[str, Mapping[str, float]]) -> None:
     """``report.txt``: the final table per gyro and the counts of the run
-    (:func:`gyrostand.render.text.run_report`)."""
-    from ..render import render
-    from ..render.views import RunReport
+    (:func:`gyrostand.report.text.run_report`)."""
+    from ..report import render
+    from ..report.views import RunReport
 
     write_atomic(path, render(RunReport(cfg.name, source, finals, stats, truths), "text"))
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
-
-
-def _clean(x: Any) -> Any:
-    if isinstance(x, float):
-        return _finite(x)
-    if isinstance(x, Mapping):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    return x

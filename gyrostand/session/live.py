@@ -53,10 +53,7 @@ from pathlib import Path
 from ..can.recorder import Recorder
 from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError, OutputError
-from ..runfolder.layout import RAW_LOG
-from .buslink import Backoff, BusLink, NotifierWatch, StopSignals, open_bus_at_start
-from .notify import ServiceNotify
-from .outputs import (
+from ..runfolder import (
     RunLock,
     RunLog,
     SegmentLog,
@@ -65,6 +62,9 @@ from .outputs import (
     next_raw_segment,
     read_segments,
 )
+from ..runfolder.layout import RAW_LOG
+from .buslink import Backoff, BusLink, NotifierWatch, StopSignals, open_bus_at_start
+from .notify import ServiceNotify
 from .pipeline import BusSink, Pipeline, RunOutcome
 from .resume import find_resume_dir, prepare_resume
 

@@ -21,17 +21,17 @@ import can
 import numpy as np
 
 from .. import progress
-from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
-from ..can.logread import LogDamage, read_log
+from ..can.logs.read import LogDamage, read_log
 from ..can.replay import replay
+from ..can.routes import ChannelMap
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
-from ..core.simulate import simulate
+from ..core.simulation import simulate
 from ..errors import ConfigError, GyrostandError
+from ..runfolder import RunLog, make_run_dir, write_atomic
 from ..runfolder.layout import RESULT
-from .outputs import RunLog, make_run_dir, write_atomic
 from .pipeline import NullSink, Pipeline, RunOutcome
 
 __all__ = ["run_replay", "run_replays", "split_runs", "log_span", "simulated_truths",
@@ -204,5 +204,8 @@ def simulated_truths(cfg: SessionConfig) -> list[Truth]:
 def simulated_frames(cfg: SessionConfig) -> Iterator[can.Message]:
     """The simulated stand's frames (time-ordered), per the config's ``simulate`` section."""
     truths = simulated_truths(cfg)  # raises ConfigError without a simulate section
+    sim = cfg.simulate
+    if sim is None:  # (simulated_truths refuses it first)
+        raise ConfigError(f"{cfg.path}: simulate: missing")
     return generate_frames(cfg.db, ChannelMap.from_config(cfg), truths,
-                           FrameSimOptions.from_config(cfg.simulate))
+                           FrameSimOptions.from_config(sim))

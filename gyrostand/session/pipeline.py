@@ -37,18 +37,19 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from ..can.binning import Bin, Binner, SamplesWriter
+from ..can.binning import Bin, Binner
 from ..can.bus import COMMANDS
-from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
+from ..can.receive.listener import DecodingListener
+from ..can.routes import ChannelMap
 from ..config import SessionConfig
 from ..errors import GyrostandError, OutputError
+from ..runfolder import EstimatesWriter, SamplesWriter, SegmentLog
 from ..runfolder.layout import RESULT
 from .acked import AckedFiles
 from .commands import CommandProtocol, TokenBucket
 from .final import write_provisional_result
 from .online import GyroTracker, OnlineEstimate
-from .outputs import EstimatesWriter, SegmentLog
 from .responses import BusSink, FrameSink, NullSink, Responses
 from .resume import ResumeState
 from .runend import RunOutcome, finish_run
@@ -70,7 +71,7 @@ class Pipeline:
 
     Args:
         cfg: the session.
-        run_dir: the run folder (see :mod:`~gyrostand.session.outputs`).
+        run_dir: the run folder (see :mod:`gyrostand.runfolder`).
         sink: where response frames go.
         source: ``"live"`` or ``"replay of <log>"`` (written into result.json).
         start_idle: begin ``idle`` (binning, no identification) until a ``start`` command.

@@ -16,19 +16,49 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
-from ..can.binning import read_samples_csv
 from ..errors import OutputError
+from ..runfolder import read_samples_csv
 from ..runfolder.layout import REPORT, RESULT
 from .commands import FAULT, STOPPED
 from .final import GyroFinal, fit_gyro, write_report, write_result_json
 from .online import OnlineEstimate
 
 if TYPE_CHECKING:
-    from .pipeline import Pipeline
+    from ..can.binning import Binner
+    from ..can.receive.listener import DecodingListener
+    from ..config import SessionConfig
+    from ..runfolder import SegmentLog
+    from .acked import AckedFiles
+    from .commands import CommandProtocol
+    from .online import GyroTracker
+    from .responses import Responses
 
-__all__ = ["RunOutcome", "finish_run"]
+__all__ = ["RunOutcome", "finish_run", "Ending"]
+
+
+class Ending(Protocol):
+    """What :func:`finish_run` uses of a run's pipeline
+    (:class:`~gyrostand.session.pipeline.Pipeline`, which calls it): its session, folder
+    and source, its parts, and its frame time, heartbeat and counts."""
+
+    cfg: SessionConfig
+    run_dir: Path
+    source: str
+    protocol: CommandProtocol
+    responses: Responses
+    files: AckedFiles
+    listener: DecodingListener
+    binner: Binner
+    trackers: dict[str, GyroTracker]
+    segments: SegmentLog | None
+
+    def frame_time(self) -> float: ...
+
+    def heartbeat(self, timestamp: float) -> None: ...
+
+    def stats(self) -> dict[str, Any]: ...
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +80,7 @@ class RunOutcome:
         return self.state != FAULT
 
 
-def finish_run(pipe: Pipeline, reason: str, *, extra_stats: dict[str, Any] | None = None,
+def finish_run(pipe: Ending, reason: str, *, extra_stats: dict[str, Any] | None = None,
                truths: dict[str, dict[str, float]] | None = None,
                state: str = STOPPED) -> RunOutcome:
     """End ``pipe``'s run for ``reason`` in ``state`` (``stopped`` or ``fault``); see the
@@ -61,7 +91,7 @@ def finish_run(pipe: Pipeline, reason: str, *, extra_stats: dict[str, Any] | Non
     protocol.end("fail" if state == FAULT else "end")
     unwritten: list[str] = []
 
-    def attempt(write: Callable[[], None]) -> None:
+    def attempt(write: Callable[[], object]) -> None:
         try:
             write()
         except OutputError as exc:  # e.g. the disk is full: say so, finish the rest
@@ -104,7 +134,7 @@ def finish_run(pipe: Pipeline, reason: str, *, extra_stats: dict[str, Any] | Non
     return RunOutcome(pipe.run_dir, result, report, finals, reason, state, stats)
 
 
-def _final_fits(pipe: Pipeline) -> tuple[list[GyroFinal], dict[str, list[OnlineEstimate]]]:
+def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEstimate]]]:
     """Per gyro: the online LKF's last re-linearisation (``lkf`` at stop), then the final
     batch fits on ``samples.csv``; the final ML as an extra estimate for the last round."""
     finals: list[GyroFinal] = []

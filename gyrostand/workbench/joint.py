@@ -1,12 +1,13 @@
 """The workbench on several runs of one gyro: a joint diagnosis, written to every run's
-ledger (:mod:`gyrostand.core.multirun` does the numerics)."""
+ledger (:mod:`gyrostand.core.ml.joint` does the numerics)."""
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
 
-from ..core.multirun import JointDiagnosis, joint_diagnose, joint_ml
+from ..core.diagnose.joint import JointDiagnosis, joint_diagnose
+from ..core.ml.joint import joint_ml
 from ..errors import OutputError
 from .ledger import append_ledger
 from .steps import FitStep, changed_model, fit_step

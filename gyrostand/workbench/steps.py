@@ -12,12 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from ..core.candidates import Report, diagnose, fit_error
-from ..core.ml import ml
+from ..core.design.separation import design_command
+from ..core.diagnose.candidates import diagnose, fit_error
+from ..core.diagnose.prederror import ModelError
+from ..core.diagnose.results import Report
+from ..core.ml.fit import ml
 from ..core.model import Model
-from ..core.prederror import ModelError
 from ..core.results import DRIFT_UNIT, FitResult
-from ..core.separation import design_command
 from ..errors import GyrostandError, OutputError
 from .ledger import append_ledger
 from .subject import Subject
@@ -77,10 +78,12 @@ def with_design_commands(rep: Report, subject: Subject) -> Report:
     run that tells them apart within this run's limits (:func:`design_command`)."""
     source = subject.run_dir if subject.run_dir is not None else subject.samples.source
     gyro = subject.gyro if subject.origin == "run" else None
+    def command(terms: Sequence[str]) -> str:
+        a, b = terms
+        return design_command(str(source), a, b, subject.samples, subject.model, gyro=gyro)
+
     return dataclasses.replace(rep, look_alikes=tuple(
-        {**la, "command": design_command(str(source), *la["terms"], subject.samples,
-                                         subject.model, gyro=gyro)}
-        for la in rep.look_alikes))
+        {**la, "command": command(la["terms"])} for la in rep.look_alikes))
 
 
 @dataclass(frozen=True)

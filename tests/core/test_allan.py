@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 from gyrostand.cli import main
-from gyrostand.core.allan import (
+from gyrostand.core.diagnose.allan import (
     BIAS_FACTOR,
     allan_table,
     edf_overlapping,
     thermal_residual,
 )
-from gyrostand.core.diagnostics import allan_deviation
+from gyrostand.core.diagnose.diagnostics import allan_deviation
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 
 def flicker(n: int, dt: float, B: float, rng: np.random.Generator) -> np.ndarray:

@@ -10,7 +10,7 @@ import pytest
 from gyrostand.cli import main
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 from ..conftest import truth
 
@@ -96,7 +96,7 @@ def test_core_imports_without_can():
     """The numerical core is hardware-free: it imports with python-can unavailable."""
     code = ("import sys; sys.modules['can'] = None; sys.modules['cantools'] = None; "
             "sys.modules['yaml'] = None; "
-            "import gyrostand.core.identify, gyrostand.core.fisher, gyrostand.core.simulate; "
+            "import gyrostand.core.registry, gyrostand.core.design.fisher, gyrostand.core.simulation; "
             "print('ok')")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.stdout.strip() == "ok", proc.stderr

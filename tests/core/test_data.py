@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.identify import identify
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.registry import identify
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import DataError, IdentificationError
 
 

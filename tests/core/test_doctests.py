@@ -14,13 +14,13 @@ import pytest
 
 import gyrostand.core
 
-CORE = ["gyrostand.core"] + [f"gyrostand.core.{m.name}"
-                             for m in pkgutil.iter_modules(gyrostand.core.__path__)]
+CORE = ["gyrostand.core"] + [m.name for m in pkgutil.walk_packages(gyrostand.core.__path__,
+                                                                   "gyrostand.core.")]
 
 #: the modules whose docstrings carry runnable examples: each must run at least one
-WITH_EXAMPLES = ["gyrostand.core", "gyrostand.core.allan", "gyrostand.core.identify",
+WITH_EXAMPLES = ["gyrostand.core", "gyrostand.core.diagnose.allan", "gyrostand.core.registry",
                  "gyrostand.core.model", "gyrostand.core.profiles", "gyrostand.core.results",
-                 "gyrostand.core.simulate"]
+                 "gyrostand.core.simulation", "gyrostand.core.summary"]
 
 
 def _run(name: str) -> doctest.TestResults:

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.lkf import OnlineLKF, lkf
-from gyrostand.core.lsq import lsq
-from gyrostand.core.ml import ml
+from gyrostand.core.lkf.filter import OnlineLKF, lkf
+from gyrostand.core.lsq.fit import lsq
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile, paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import ModelError
 
 from ..conftest import truth
@@ -214,7 +214,7 @@ def test_lkf_history_tracks_convergence(base_model, c1_samples):
 
 
 def test_online_lsq_equals_batch_lsq():
-    from gyrostand.core.lsq import OnlineLSQ
+    from gyrostand.core.lsq.fit import OnlineLSQ
 
     m = Model.parse("markov,temp,bias")
     p = truth("C1", sigma_v=0.02, **{"bias.b": 0.2})

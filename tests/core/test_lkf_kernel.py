@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gyrostand.core.kalman import foh_weights
-from gyrostand.core.lkf_kernel import lkf_pass
+from gyrostand.core.lkf.kernel import lkf_pass
 
 
 def dense_pass(y, U, X, th_in, th_out, phi0, a0, a1, q0, r, phix, qx, feedback, x, P, eps0):

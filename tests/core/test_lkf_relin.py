@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.lkf import lkf
-from gyrostand.core.lkf_relin import RelinLKF
-from gyrostand.core.ml import ml
+from gyrostand.core.lkf.filter import lkf
+from gyrostand.core.lkf.relin import RelinLKF
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile, paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import ModelError
 
 from ..conftest import truth

@@ -1,11 +1,11 @@
-"""The online LSQ's recursive factor (:class:`gyrostand.core.lsq.GivensQR`)."""
+"""The online LSQ's recursive factor (:class:`gyrostand.core.lsq.fit.GivensQR`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from gyrostand.core.lsq import GivensQR
+from gyrostand.core.lsq.fit import GivensQR
 
 
 def test_givens_factor_solves_like_lstsq_and_costs_no_normal_equations():

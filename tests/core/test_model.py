@@ -9,7 +9,7 @@ from gyrostand.core.data import Samples
 from gyrostand.core.kalman import foh_weights
 from gyrostand.core.model import Model, context
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import GyrostandError, ModelError
 
 
@@ -66,7 +66,7 @@ def test_temperature_input_is_exact_for_a_ramp():
     beta, c = 0.01, 0.05
     t = np.arange(0.0, 300.0)
     s = Samples.from_arrays(t, np.zeros_like(t), c * t)
-    x = context(s).through_markov(c * t, beta)
+    x = context(s, None).through_markov(c * t, beta)
     C = 0.0 + c / beta**2  # x(0) = u(0)/beta = 0
     exact = c * (t / beta - 1 / beta**2) + C * np.exp(-beta * t)
     np.testing.assert_allclose(x, exact, rtol=1e-10, atol=1e-9)
@@ -75,7 +75,7 @@ def test_temperature_input_is_exact_for_a_ramp():
 def dense_loglik(model, p, s):
     """Log-density of y under the model by brute force: y ~ N(Xθ, Σ)."""
     N = len(s)
-    X = model.regressors(p, context(s))
+    X = model.regressors(p, context(s, model))
     theta = np.array([p[n] for n in model.names_of_kind("linear")])
     mean = X @ theta if theta.size else np.zeros(N)
     k = np.arange(N)
@@ -113,7 +113,7 @@ def test_likelihood_with_gaps_is_the_marginal_density():
     y[gap] = np.nan
     sg = Samples.from_arrays(s.t, y, s.temp)
     keep = np.isfinite(y)
-    X = m.regressors(p, context(s))
+    X = m.regressors(p, context(s, m))
     mean = X @ np.array([p["temp.gamma"], p["bias.b"]])
     k = np.arange(len(s))
     cov = np.eye(len(s)) * 0.03**2 + 0.01 * np.exp(-0.05) ** np.abs(k[:, None] - k[None, :])

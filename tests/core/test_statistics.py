@@ -12,11 +12,11 @@ own relative std is about 1/√(2n), 9 % at n = 60).
 import numpy as np
 import pytest
 
-from gyrostand.core.fisher import crlb
-from gyrostand.core.ml import ml
+from gyrostand.core.design.fisher import crlb
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 from ..conftest import truth
 

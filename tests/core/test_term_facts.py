@@ -10,13 +10,14 @@ silently dropped from the cross-correlation).
 import numpy as np
 import pytest
 
-from gyrostand.core import terms
-from gyrostand.core.diagnostics import candidate_regressor
-from gyrostand.core.lkf import OnlineLKF, lkf_layout, lkf_terms
+from gyrostand.core.diagnose.diagnostics import candidate_regressor
+from gyrostand.core.lkf.filter import OnlineLKF, lkf_layout, lkf_terms
 from gyrostand.core.model import Model, StateSpace, context
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
-from gyrostand.core.terms import NULLS, ROLES, TERMS, Param, Term, register, separation
+from gyrostand.core.simulation import simulate
+from gyrostand.core.terms import builtin as terms
+from gyrostand.core.terms.base import REQUIRED_HOOKS
+from gyrostand.core.terms.builtin import NULLS, ROLES, TERMS, Param, Term, register, separation
 from gyrostand.errors import ModelError
 
 from ..conftest import truth
@@ -56,7 +57,7 @@ def test_built_in_facts_are_consistent():
 
 
 def test_every_candidate_has_a_signature_or_says_why_not(c1_samples):
-    ctx = context(c1_samples)
+    ctx = context(c1_samples, Model.parse("markov,temp"))
     p = {"markov.beta": 0.03, "temp.gamma": -0.01, "warmup.tau": 100.0}
     sig = {}
     for name, cls in TERMS.items():
@@ -74,7 +75,7 @@ def test_every_candidate_has_a_signature_or_says_why_not(c1_samples):
 
 
 def test_a_term_without_a_signature_or_a_causal_regressor_is_named(bare, c1_samples):
-    ctx = context(c1_samples)
+    ctx = context(c1_samples, Model.parse("markov,temp"))
     with pytest.raises(ModelError, match="'bare_test_term' has no diagnostic signature"):
         candidate_regressor("bare_test_term", ctx, {})
     m = Model.parse("markov,temp,bare_test_term")
@@ -97,12 +98,16 @@ def test_register_refuses_a_clash_and_assigns_the_next_bit(monkeypatch):
         params = (Param("b", "linear", "y", "offset"),)
 
     with pytest.raises(ModelError, match=r"clashes with the built-in term 'bias' "
-                                         r"\(gyrostand\.core\.terms\.Bias\)"):
+                                         r"\(gyrostand\.core\.terms\.builtin\.Bias\)"):
         register(MyBias, "mine.MyBias")
 
     class Ok(Term):
         name = "ok_test_term"
         params = (Param("c", "linear", "y", "offset"),)
+        math = "+ c"
+
+        def regressors(self, p, ctx):
+            return {self.key("c"): np.ones_like(ctx.t)}
 
     register(Ok, "mine.Ok")
     assert Ok.bit == len(terms.BUILTIN) and terms.summary_bits()["ok_test_term"] == 12
@@ -113,6 +118,77 @@ def test_register_refuses_a_clash_and_assigns_the_next_bit(monkeypatch):
     with pytest.raises(ModelError, match=r"clashes with the plugin term 'ok_test_term' "
                                          r"\(mine\.Ok\)"):
         register(Again, "other.Again")
+
+
+def test_every_built_in_term_keeps_the_contract_of_its_role():
+    for name, cls in TERMS.items():
+        assert cls.contract_gaps() == [], name
+        for hook in REQUIRED_HOOKS[cls.role]:
+            assert cls.overrides(hook), (name, hook)
+
+
+def test_register_names_the_fact_a_term_lacks(monkeypatch):
+    """The contract is checked when a term registers, not when the LKF first runs it."""
+    monkeypatch.setattr(terms, "TERMS", dict(TERMS))
+    monkeypatch.setattr(terms, "ORIGIN", {})
+
+    class NoRegressor(Term):
+        name = "no_regressor_term"
+        params = (Param("c", "linear", "y", "offset"),)
+        math = "+ c"
+
+    with pytest.raises(ModelError, match=r"plugin mine.NoRegressor: term 'no_regressor_term' "
+                                         r"\(role 'output'\) lacks .*regressors\(\)"):
+        register(NoRegressor, "mine.NoRegressor")
+
+    class Cubed(Term):
+        """A cubic in T, LKF-capable (a causal regressor), coefficient in y/degC³."""
+        name = "temp_cubed"
+        params = (Param("c", "linear", "y/degC^3", "cubic coefficient"),)
+        math = "+ c·(T − 25)³"
+
+        def regressors(self, p, ctx):
+            return {self.key("c"): (ctx.temp - 25.0) ** 3}
+
+        def causal_regressors(self, p, now):
+            return {self.key("c"): (now.T - 25.0) ** 3}
+
+    with pytest.raises(ModelError, match=r"lacks .*prior_std\(\) \(the online LKF's prior "
+                                         r"scale of c \(unit y/degC\^3\)"):
+        register(Cubed, "mine.Cubed")
+
+    class CubedMlOnly(Cubed):
+        """The same without a causal regressor: the LKF refuses it anyway (no prior needed)."""
+        name = "temp_cubed_ml"
+        causal_regressors = Term.causal_regressors
+
+    assert register(CubedMlOnly, "mine.CubedMlOnly") is CubedMlOnly
+
+    class CubedWithPrior(Cubed):
+        name = "temp_cubed_prior"
+
+        def prior_std(self, s):
+            return {self.key("c"): 10 * s.y / s.T ** 3}
+
+    assert register(CubedWithPrior, "mine.CubedWithPrior") is CubedWithPrior
+
+    class Odd(Term):
+        name = "odd_role_term"
+        role = "sideways"
+        math = "?"
+
+    with pytest.raises(ModelError, match=r"role \(one of process, noise, input, output, "
+                                         r"modifier; got 'sideways'\)"):
+        register(Odd, "mine.Odd")
+
+    class Process(Term):
+        name = "stateless_process"
+        role = "process"
+        math = "x"
+
+    with pytest.raises(ModelError, match=r"states\(\) \(every process term defines it\); "
+                                         r"n_states"):
+        register(Process, "mine.Process")
 
 
 def test_the_state_space_is_named_and_shared_by_simulation_and_likelihood():

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from gyrostand.core.design import (
+from gyrostand.core.design.search import (
     ChamberLimits,
     case_temperature,
     design,
@@ -133,8 +133,8 @@ def test_six_hour_design_halves_the_worst_std_and_simulations_confirm_it():
     program's worst-determined parameter (of those in doubt) >= 2x better than the
     standard cycle's, and 100 simulated runs of each, fitted by ML, realize the predicted
     std within 20 %."""
-    from gyrostand.core.ml import ml
-    from gyrostand.core.simulate import simulate
+    from gyrostand.core.ml.fit import ml
+    from gyrostand.core.simulation import simulate
 
     model = Model.parse(MODEL)
     lim = ChamberLimits(0, 50, 1 / 60, 600, 6 * 3600, legs=6)

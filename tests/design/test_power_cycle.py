@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.design import ChamberLimits, case_temperature, standard_cycle
-from gyrostand.core.model import Model, context
-from gyrostand.core.separation import expected_lr, rivals
-from gyrostand.core.switch_ons import (
+from gyrostand.core.design.search import ChamberLimits, case_temperature, standard_cycle
+from gyrostand.core.design.separation import expected_lr, rivals
+from gyrostand.core.design.switch_ons import (
     _protocol_distance,
     expected_lr_protocol,
     power_cycle,
     verify_protocol,
 )
+from gyrostand.core.model import Model, context
 
 BASE = {"markov.beta": 0.0015, "markov.sigma": 0.05, "temp.gamma": -0.0002, "bias.b": 0.1,
         "white.sigma": 0.01}
@@ -52,7 +52,7 @@ def test_protocol_distance_is_the_dense_gls():
     lin = fit.names_of_kind("linear")
     XtVX, XtVy, yVy = 0.0, 0.0, 0.0
     for s, d in zip(recs, offsets, strict=True):
-        X = fit.regressors(p, context(s)).copy()
+        X = fit.regressors(p, context(s, fit)).copy()
         X[:, lin.index("trend.c")] += d
         Vi = np.linalg.inv(_dense(p, n) + sb * sb * np.ones((n, n)))
         y = np.asarray(s.drift)
@@ -122,7 +122,7 @@ def test_the_command_designs_and_verifies_a_power_cycle(tmp_path):
 def test_the_splits_tried_keep_the_powered_on_budget():
     """Equal splits of at least an hour and a long first run with one or two 1-h runs
     after it, every split summing to the budget."""
-    from gyrostand.core.switch_ons import protocol_splits
+    from gyrostand.core.design.switch_ons import protocol_splits
 
     lim = ChamberLimits(0, 50, 1 / 60, 600, 6 * 3600, legs=6)
     splits = protocol_splits(lim)

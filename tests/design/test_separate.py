@@ -16,20 +16,18 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.design import ChamberLimits, case_temperature, standard_cycle
-from gyrostand.core.model import Model, context
-from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.separation import (
+from gyrostand.core.design.divergence import (
     _distance,
     _spectrum,
-    _whittle,
     divergence,
     mean_response,
-    rivals,
-    separate,
-    verify,
+    whittle_loglik,
 )
-from gyrostand.core.simulate import simulate
+from gyrostand.core.design.search import ChamberLimits, case_temperature, standard_cycle
+from gyrostand.core.design.separation import rivals, separate, verify
+from gyrostand.core.model import Model, context
+from gyrostand.core.profiles import chamber_profile
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import ModelError
 
 BASE = {"markov.beta": 0.0015, "markov.sigma": 0.05, "temp.gamma": -0.0002, "bias.b": 0.1,
@@ -61,7 +59,7 @@ def test_the_whitened_distance_is_the_gls_distance():
     temp = 25 + 10 * np.sin(t / 40.0)
     s = Samples(t, np.zeros_like(t), temp, 1.0)
     s = s.replace(drift=mean_response(ma, pa, s))
-    X = mb.regressors(pb, context(s))
+    X = mb.regressors(pb, context(s, mb))
     Ci = np.linalg.inv(_dense_cov(mb, pb, t.size, 1.0))
     beta = np.linalg.solve(X.T @ Ci @ X, X.T @ Ci @ s.drift)
     r = s.drift - X @ beta
@@ -81,7 +79,7 @@ def test_the_noise_divergence_is_the_gaussian_kl():
     exact = (np.trace(np.linalg.solve(B, A)) - n + np.linalg.slogdet(B)[1]
              - np.linalg.slogdet(A)[1])
     w = 2 * np.pi * np.arange(1, n // 2 + 1) / n
-    got = _whittle(_spectrum(ma, pa, 1.0, w), mb, pb, w, 1.0, n)
+    got = whittle_loglik(_spectrum(ma, pa, 1.0, w), mb, pb, w, 1.0, n)
     assert got == pytest.approx(exact, rel=0.03), (got, exact)
 
 
@@ -160,7 +158,7 @@ def test_the_command_writes_the_separating_program(tmp_path):
 def _trend_run_diagnosis(tmp_path):
     """A 4-h chamber run (10..45 °C, ramps up to 2 °C/min) with a hidden trend, diagnosed
     with the trend and warm-up candidates: (its path, temperatures, subject, report)."""
-    from gyrostand.core.candidates import diagnose
+    from gyrostand.core.diagnose.candidates import diagnose
     from gyrostand.workbench import open_subject
     from gyrostand.workbench.steps import with_design_commands
 
@@ -183,7 +181,7 @@ def test_diagnose_prints_the_design_command_with_the_runs_limits(tmp_path):
     `design --separate` command with this run's path, model and limits (JSON too, the
     term's advice kept), and the text prints it."""
     from gyrostand.cli import build_parser
-    from gyrostand.render.text import diagnosis
+    from gyrostand.report.text import diagnosis
 
     path, temp, subject, rep = _trend_run_diagnosis(tmp_path)
     (la,) = rep.look_alikes
@@ -245,7 +243,7 @@ def test_the_joint_distance_is_the_gls_distance_over_the_runs():
     """Two runs fitted by the warm-up model with a shared γ and each run's own bias and
     warm-up amplitude: the stacked Kalman-whitened least squares = the dense GLS with a
     block-diagonal covariance (the runs independent) and per-run columns."""
-    from gyrostand.core.separation import _joint_distance
+    from gyrostand.core.design.divergence import _joint_distance
 
     ma, mb = Model.parse("markov,temp,bias,trend"), Model.parse("markov,temp,bias,warmup")
     pa = {**BASE, "markov.beta": 0.02, "trend.c": 1e-4}
@@ -257,7 +255,7 @@ def test_the_joint_distance_is_the_gls_distance_over_the_runs():
         s = s.replace(drift=mean_response(ma, pa, s))
         recs.append(s)
         ys.append(s.drift)
-        cols.append(mb.regressors(pb, context(s)))
+        cols.append(mb.regressors(pb, context(s, mb)))
         Cs.append(_dense_cov(mb, pb, n, 1.0))
     lin = mb.names_of_kind("linear")
     per = [lin.index("bias.b"), lin.index("warmup.A")]
@@ -279,7 +277,7 @@ def test_k_alike_switch_ons_give_k_times_one_runs_expected_lr():
     joint refit's optimum is every run's own (the sum of k equal functions), so Λ is k ×
     one run's — with the warm-up's τ refitted per run, and the trend shared (measured:
     0.385 and 1.16 from the warm-up)."""
-    from gyrostand.core.separation import divergence_runs
+    from gyrostand.core.design.divergence import divergence_runs
 
     lim = ChamberLimits(0, 50, 1 / 60, 300, 1800, legs=3)
     case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
@@ -300,8 +298,9 @@ def test_trend_and_warmup_are_time_only_and_a_split_budget_is_measured():
     switch-ons gives each split's Λ (measured at 2 h: both directions fall with the split,
     the per-run bias absorbing each restart's level), and the joint verify of a split design
     on data from a short warm-up picks the warm-up every time."""
-    from gyrostand.core.separation import Rivals, divergence_runs, time_only
-    from gyrostand.core.switch_ons import separate_switch_ons, switch_on_records
+    from gyrostand.core.design.divergence import divergence_runs
+    from gyrostand.core.design.separation import Rivals, time_only
+    from gyrostand.core.design.switch_ons import separate_switch_ons, switch_on_records
 
     lim = ChamberLimits(0, 50, 1 / 60, 600, 2 * 3600, legs=6)
     case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)

@@ -35,8 +35,8 @@ from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.replay import read_log
 from gyrostand.cli import main as cli_main
 from gyrostand.config import load_config
+from gyrostand.runfolder import raw_segments
 from gyrostand.session.offline import run_replay, simulated_frames
-from gyrostand.session.outputs import raw_segments
 
 from .procs import Daemon, Observer, RemoteServer, frame_key, send_paced, write_config
 

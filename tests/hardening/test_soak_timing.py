@@ -17,8 +17,8 @@ import yaml
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.cli import main as cli_main
 from gyrostand.config import load_config
+from gyrostand.runfolder import raw_segments
 from gyrostand.session.offline import simulated_frames
-from gyrostand.session.outputs import raw_segments
 
 from .procs import DBC, DEMO, Daemon, Observer, RemoteServer, send_paced
 

@@ -1,7 +1,7 @@
 """Sets of runs of one simulated gyro: shared physics, a new turn-on bias every switch-on.
 
 Each run is a chamber cycle of ``hours`` simulated with the model's exact discretisation
-(:func:`gyrostand.core.simulate.simulate`: every run starts from its own stationary
+(:func:`gyrostand.core.simulation.simulate`: every run starts from its own stationary
 Markov state); the per-run biases are drawn ``N(BIAS_MEAN, SPREAD²)`` — the spread the
 repeatability estimate must recover.
 """
@@ -12,7 +12,7 @@ import numpy as np
 
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 MODEL = "markov,temp,bias"
 #: the gyro's physics, shared by every run (drift unit y, β 1/s, γ y/(s·°C))

@@ -1,4 +1,4 @@
-"""The joint exact likelihood of several runs of one gyro (gyrostand.core.multirun)."""
+"""The joint exact likelihood of several runs of one gyro (gyrostand.core.ml.joint)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from gyrostand.core.data import Samples
-from gyrostand.core.ml import ml
+from gyrostand.core.ml.fit import ml
+from gyrostand.core.ml.joint import joint_ml, repeatability
+from gyrostand.core.ml.joint_problem import run_key
 from gyrostand.core.model import Model
-from gyrostand.core.multirun import joint_ml, repeatability, run_key
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import DataError
 
 from ..workbench.framelike import frame_run

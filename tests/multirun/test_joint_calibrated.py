@@ -1,5 +1,5 @@
 """Joint (several-run) diagnoses test a candidate with a shape as single runs do: its LR
-against the supremum of a χ²(df) process over the shape (gyrostand.core.candidates), the
+against the supremum of a χ²(df) process over the shape (gyrostand.core.diagnose.candidates), the
 process's geometry taken on the joint model (the runs' whitened regressors stacked, the
 joint fit's metric)."""
 
@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import pytest
 
-from gyrostand.core.candidates import TEST_SUP, rank_candidates
 from gyrostand.core.chisq import sup_chi2_sf
-from gyrostand.core.ml import ml
-from gyrostand.core.multirun import JointDiagnosis, joint_ml
-from gyrostand.render.text import RENDERER
+from gyrostand.core.diagnose.candidates import rank_candidates
+from gyrostand.core.diagnose.joint import JointDiagnosis
+from gyrostand.core.diagnose.results import TEST_SUP
+from gyrostand.core.ml.fit import ml
+from gyrostand.core.ml.joint import joint_ml
+from gyrostand.report.text import RENDERER
 
 from .sets import run_set
 

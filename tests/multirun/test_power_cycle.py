@@ -8,10 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gyrostand.core.ml.joint import joint_ml
+from gyrostand.core.ml.joint_problem import JointProblem
 from gyrostand.core.model import Model, context
-from gyrostand.core.multirun import _JointProblem, joint_ml
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.errors import DataError
 
 P = {"markov.beta": 0.0015, "markov.sigma": 0.05, "temp.gamma": -0.0002, "bias.b": 0.1,
@@ -45,11 +46,11 @@ def test_random_bias_loglik_is_the_dense_gls():
             for s in _set(3, 1.0, [0.0, 40000.0], 0.1)]
     runs = [s.replace(t=np.asarray(s.t), drift=np.asarray(s.drift)) for s in runs]
     sb = 0.1
-    prob = _JointProblem(M, runs, {}, bias_spread=sb, absolute_time=True)
+    prob = JointProblem(M, runs, {}, bias_spread=sb, absolute_time=True)
     lls = prob.random_loglik(P)
     for r, s in enumerate(runs):
         n = len(s)
-        X = M.regressors(P, context(s))
+        X = M.regressors(P, context(s, M))
         theta = np.array([P[k] for k in M.names_of_kind("linear")])
         mean = X @ theta + P["trend.c"] * (s.t[0] - runs[0].t[0])
         V = _dense_cov(P, n) + sb * sb * np.ones((n, n))
@@ -65,7 +66,7 @@ def test_infinite_spread_is_the_free_bias_and_absolute_time_is_absorbed_by_it():
     changes nothing (each bias absorbs the trend's level at its switch-on)."""
     runs = _set(5, 1.0, [0.0, 30000.0, 60000.0], 0.1)
     free = joint_ml(runs, M, std_errors=False)
-    plain, shifted = _JointProblem(M, runs, {}), _JointProblem(M, runs, {}, absolute_time=True)
+    plain, shifted = JointProblem(M, runs, {}), JointProblem(M, runs, {}, absolute_time=True)
     for z in (np.array([np.mean(b) for b in plain.bounds]), np.log([0.0015, 0.2])):
         a, (_, theta_a, _, _) = plain.profile(z)
         b, (_, theta_b, _, _) = shifted.profile(z)
@@ -73,7 +74,7 @@ def test_infinite_spread_is_the_free_bias_and_absolute_time_is_absorbed_by_it():
         c = plain.lin_free.index("trend.c")
         assert theta_b[c] == pytest.approx(theta_a[c], rel=1e-6, abs=1e-12)
     sb = 1e4
-    prob = _JointProblem(M, runs, {}, bias_spread=sb, absolute_time=True)
+    prob = JointProblem(M, runs, {}, bias_spread=sb, absolute_time=True)
     p = {k: v for k, v in free.values.items() if "@" not in k}
     p["bias.b"] = 0.0
     corr = 0.0
@@ -87,11 +88,11 @@ def test_default_joint_fit_has_no_protocol():
     """The protocol is an explicit option: the default problem has none of it, and asking
     for it on a model without a free bias is an error naming it."""
     runs = _set(6, 1.0, [0.0, 30000.0], 0.1)
-    prob = _JointProblem(M, runs, {})
+    prob = JointProblem(M, runs, {})
     assert prob.spread is None and prob.bias_col is None and prob.trend_col is None
     assert prob.per_run == {"bias.b"}
     with pytest.raises(DataError, match="free bias"):
-        _JointProblem(Model.parse("markov,temp,trend"), runs, {}, bias_spread=0.1)
+        JointProblem(Model.parse("markov,temp,trend"), runs, {}, bias_spread=0.1)
 
 
 def test_a_power_cycled_set_recovers_the_shared_trend():

@@ -181,7 +181,7 @@ def test_identify_with_a_plugin_term_from_a_csv(installed, tmp_path):
         "load_entry_points()\n"
         "from gyrostand.core.model import Model\n"
         "from gyrostand.core.profiles import TemperatureProfile\n"
-        "from gyrostand.core.simulate import simulate\n"
+        "from gyrostand.core.simulation import simulate\n"
         f"prof = TemperatureProfile.from_breakpoints({PROFILE!r})\n"
         "m = Model.parse('markov,temp,bias,temp_step')\n"
         f"s = simulate(m, {TRUTH!r}, prof, seed=11)\n"
@@ -199,6 +199,15 @@ def test_identify_with_a_plugin_term_from_a_csv(installed, tmp_path):
     r = gyrostand("identify", str(tmp_path / "samples.csv"), "--model",
                   "markov,temp,temp_step", path=None, check=False)
     assert r.returncode == 2 and "unknown model term 'temp_step'" in r.stderr
+
+
+def test_every_help_lists_the_installed_plugin_terms(installed):
+    """``--help`` of each command taking terms lists the plugin's by its entry point (not
+    imported for it); without the plugin installed, only the built-ins."""
+    for cmd in ("fit", "identify", "design", "allan", "batch"):
+        with_plugin = gyrostand(cmd, "--help", path=installed).stdout
+        assert "temp_step" in with_plugin and "hysteresis" in with_plugin, cmd
+        assert "temp_step" not in gyrostand(cmd, "--help", path=None).stdout, cmd
 
 
 def test_plugins_key_of_the_session_file(tmp_path):
@@ -238,4 +247,4 @@ def test_a_plugin_term_named_like_a_built_in_is_refused(tmp_path):
     assert r.returncode == 2
     err = r.stderr
     assert "plugins[0]" in err and "my_bias.MyBias" in err  # the plugin ...
-    assert "built-in term 'bias'" in err and "gyrostand.core.terms.Bias" in err  # ... and it
+    assert "built-in term 'bias'" in err and "gyrostand.core.terms.builtin.Bias" in err  # ... and it

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from gyrostand.cli import main
-from gyrostand.render import FORMATS, render, renderer
+from gyrostand.report import FORMATS, render, renderer
 from tests.report.conftest import chamber_samples
 
 from .make_golden import _session

@@ -9,7 +9,7 @@ import pytest
 from gyrostand.core.data import Samples
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 TRUTH = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
          "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 8.0}

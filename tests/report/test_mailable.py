@@ -17,14 +17,14 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
 
 from gyrostand.cli import main
-from gyrostand.core.allan import drift_tables
-from gyrostand.core.ml import ml
+from gyrostand.core.diagnose.allan import drift_tables
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model, context
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
-from gyrostand.render.views import AllanView
+from gyrostand.core.simulation import simulate
 from gyrostand.report import figures, write_report
 from gyrostand.report.page import png_header_size
+from gyrostand.report.views import AllanView
 from gyrostand.workbench import open_subject, run_diagnose
 
 from .test_report import FIGURES, parse
@@ -172,7 +172,7 @@ def test_first_figure_keeps_the_measured_trace_visible(chamber_report):
     subject, rep = chamber_report
     s = subject.samples
     p = rep.fit.values
-    X = rep.model.regressors(p, context(s))
+    X = rep.model.regressors(p, context(s, rep.model))
     det = X @ np.array([p[k] for k in rep.model.names_of_kind("linear")])
     fig = figures.measured_vs_model(s, rep, det)
     ax = fig.axes[0]

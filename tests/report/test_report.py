@@ -14,12 +14,12 @@ from matplotlib.image import imread
 
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
-from gyrostand.core.lkf import lkf
+from gyrostand.core.lkf.filter import lkf
 from gyrostand.core.model import Model
 from gyrostand.report import default_dir, write_report
 from gyrostand.report.page import png_size
 from gyrostand.report.series import envelope, ledger_points, read_estimates
-from gyrostand.session.outputs import estimate_columns
+from gyrostand.runfolder import estimate_columns
 from gyrostand.workbench import open_subject, read_ledger, run_diagnose, run_fit
 
 from .conftest import chamber_samples

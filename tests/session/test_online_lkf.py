@@ -13,10 +13,10 @@ from sessionhelpers import TRUTH, decode, last_results, make_cfg, run_virtual
 
 from gyrostand.can.bus import STATUS_CODES
 from gyrostand.config import LkfConfig
-from gyrostand.core.ml import ml
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.session.offline import simulated_frames
 from gyrostand.session.online import LkfTrack
 

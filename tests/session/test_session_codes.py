@@ -218,14 +218,15 @@ def test_a_model_terms_mask_wider_than_its_signal_is_refused_at_load_and_never_s
                        r"signal ModelTerms \(8 bits, max 255\) cannot carry the model markov, "
                        r"temp, trend \(mask 0x103 needs 9 bits\)"):
         load()
-    assert _cfg_with(tmp_path, narrow, model=["markov", "temp", "hysteresis"])()  # bit 7 fits
+    assert _cfg_with(tmp_path, narrow, model=["markov", "temp", "hysteresis"],
+                     identifiers=["lkf", "ml"])()  # bit 7 fits
     enc = FrameEncoder(cantools.database.load_string(narrow))
     with pytest.raises(CanEdgeError, match="cannot carry the model markov, trend"):
         enc.summary_frame("GS_SUMMARY_1", "ml", "ok", ["markov", "trend"], 10, 0.1)
 
 
 def test_a_gyro_s_identifier_options_come_from_the_registry_and_its_lkf_section():
-    from gyrostand.core.registry import LkfOptions, LsqOptions, MlOptions
+    from gyrostand.core.options import LkfOptions, LsqOptions, MlOptions
 
     d = copy.deepcopy(demo_dict())
     d["gyros"][0]["lkf"] = {"beta0": 0.02, "variant": "paper"}

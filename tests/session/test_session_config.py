@@ -58,3 +58,24 @@ def test_lkf_warm_up_gives_up_with_bounded_memory():
     assert lkf.status == "failed" and "no usable warm-up within 201 bins" in lkf.note
     tr.reset()
     assert tr.estimates()[0].status == "insufficient_data"
+
+
+def test_the_loader_asks_each_identifier_whether_it_can_identify_the_model(caplog):
+    """``run --check`` refuses an identifier the model is beyond (lsq and temp_rate: least
+    squares' regression has no such column), naming the key and the term, instead of a run
+    whose lsq is refused at every bin; left to the defaults, the identifier is dropped
+    with a warning and the others run."""
+    d = copy.deepcopy(demo_dict())
+    d["gyros"][0]["model"] = ["markov", "temp", "temp_rate"]
+    d["gyros"][0]["identifiers"] = ["lkf", "lsq"]
+    with pytest.raises(ConfigError, match=r"t\.yaml: gyros\[0\]\.identifiers: lsq cannot "
+                                          r"identify this model: lsq does not support the "
+                                          r"term\(s\) temp_rate; use ml"):
+        parse_config(d, source="t.yaml", base_dir=DEMO.parent)
+    d["gyros"][0]["identifiers"] = ["lkf"]
+    assert parse_config(d, "t.yaml", DEMO.parent).gyros[0].identifiers == ("lkf",)
+    del d["gyros"][0]["identifiers"]
+    with caplog.at_level("WARNING"):
+        g = parse_config(d, "t.yaml", DEMO.parent).gyros[0]
+    assert g.identifiers == ("lkf",)
+    assert "lsq cannot identify the model (markov, temp, temp_rate)" in caplog.text

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from gyrostand.session.outputs import SEGMENTS_FILE, SegmentLog, read_segments
+from gyrostand.runfolder import SEGMENTS_FILE, SegmentLog, read_segments
 
 
 def _stats(received: int, decoded: int, bins: int, rows: int, late: int = 0) -> dict:

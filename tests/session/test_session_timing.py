@@ -14,8 +14,8 @@ from sessionhelpers import make_cfg, run_virtual
 
 from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import read_logs
+from gyrostand.runfolder import raw_segments
 from gyrostand.session.offline import run_replay, simulated_frames
-from gyrostand.session.outputs import raw_segments
 
 
 def _shift(f: can.Message, t: float) -> can.Message:

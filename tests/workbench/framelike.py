@@ -20,7 +20,7 @@ import numpy as np
 from gyrostand.can.binning import Binner
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 BASE = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
         "white.sigma": 0.02, "bias.b": 0.3}

@@ -2,7 +2,7 @@
 warm-up's τ): not identified when its coefficient is 0, so its LR — the supremum over the
 shape — is referred to the supremum of a χ² process (Euler characteristic / Davies 1987,
 :func:`gyrostand.core.chisq.sup_chi2_sf`) with the curvatures of the shape's range
-(:func:`gyrostand.core.candidates.shape_curvatures`), not to χ²(1 + shapes).
+(:func:`gyrostand.core.diagnose.candidates.shape_curvatures`), not to χ²(1 + shapes).
 
 The tail is checked against a Monte Carlo of the very process: Z(θ) = u(θ)'ε with ε iid
 N(0, 1), u(θ) the whitened, projected regressor on the refit's grid, on a clean 2-h run
@@ -16,17 +16,11 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
-from gyrostand.core.candidates import (
-    TEST_CHI2,
-    TEST_MIXTURE,
-    TEST_SUP,
-    rank_candidates,
-    shape_curvatures,
-    shape_grid,
-    shape_params,
-)
 from gyrostand.core.chisq import chi2_sf, sup_chi2_sf
-from gyrostand.core.ml import ml
+from gyrostand.core.diagnose.candidates import rank_candidates
+from gyrostand.core.diagnose.results import TEST_CHI2, TEST_MIXTURE, TEST_SUP
+from gyrostand.core.diagnose.shapes import shape_curvatures, shape_grid, shape_params
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
 from gyrostand.workbench import open_subject
@@ -121,18 +115,18 @@ def test_the_efficient_score_is_the_refit_lr_at_a_fixed_shape(clean):
     """The metric behind the curvatures: the current parameters (β, γ) readjust with the
     candidate, so the LR at a fixed lag is the efficient score x'ε / √(x'Mx), not the
     score taken orthogonal to the regressors alone (about half the LR on these runs)."""
-    from gyrostand.core.candidates import _efficient_metric, _mean_tangents
+    from gyrostand.core.diagnose.shapes import _efficient_metric, mean_tangents
     from gyrostand.core.model import context
     from gyrostand.core.validate import prepare
 
     sub, fit = clean
     model = sub.model
     used = prepare(sub.samples, "test")
-    ctx = context(used)
+    ctx = context(used, model)
     e, f = model.innovations(fit.values, used)
     ok = np.isfinite(e) & (f > 0)
     eps = e[ok] / np.sqrt(f[ok])
-    names, tangents = _mean_tangents(model, fit, ctx)
+    names, tangents = mean_tangents(model, fit, ctx)
     assert "markov.beta" in names and "temp.gamma" in names
     tau = 3.0
     x = model.add("temp_rate").term_of("temp_rate.k").regressors(

@@ -9,7 +9,7 @@ import pytest
 from gyrostand.cli import main
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ import pytest
 from gyrostand.core.data import Samples
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
-from gyrostand.core.simulate import simulate
+from gyrostand.core.simulation import simulate
 from gyrostand.workbench import open_subject, read_ledger, run_diagnose, run_fit
 
 BASE = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from gyrostand.cli import main
-from gyrostand.core.candidates import diagnose, fit_error
 from gyrostand.core.data import Samples
+from gyrostand.core.diagnose.candidates import diagnose, fit_error
 from gyrostand.core.kalman import kf_run
-from gyrostand.core.ml import ml
+from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import LOG_2PI, Model
 from gyrostand.workbench import open_subject, read_ledger, run_diagnose, run_fit
 

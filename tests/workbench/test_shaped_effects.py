@@ -65,7 +65,7 @@ def test_the_plain_shape_is_the_default_everywhere():
     the shape out get exactly the old regressors."""
     from gyrostand.core.model import Model
     from gyrostand.core.profiles import chamber_profile
-    from gyrostand.core.term_base import HYSTERESIS_RATE, Bin, Context
+    from gyrostand.core.terms.base import HYSTERESIS_RATE, Bin, Context
 
     m = Model.parse("markov,temp,temp_rate,hysteresis")
     assert m.defaults == {"temp_rate.tau": 0.0, "hysteresis.tau": 0.0,

@@ -1,0 +1,469 @@
+"""Which effect is missing: refit with every candidate term, rank by likelihood ratio.
+
+For a model M fitted by ML and every vocabulary term c not in M (whose requirements M
+meets), M + c is fitted and compared with M (forward selection with likelihood-ratio
+tests, as CTSM-R does for grey-box models):
+
+    LR = 2 (ln L₁ − ln L₀) ~ χ²(df)      df = parameters c adds
+    ΔAIC = −LR + 2 df,   ΔBIC = −LR + df ln n
+
+Where the null value sits on the boundary of the parameter space (a noise intensity → 0)
+the reference distribution is the 50:50 mixture ½χ²(0) + ½χ²(df) (Self & Liang 1987): the
+p-value is halved. Where a parameter is not identified under the null (a time constant or
+a second correlation time when the effect's amplitude is 0: Davies 1987) the supremum of
+the LR over it exceeds χ²(df). A deterministic candidate with one coefficient and a shape
+(``temp_rate.tau``, ``hysteresis.tau``/``w``, ``warmup.tau``: not identified when the
+coefficient is 0) is tested calibrated: its LR, the supremum over the shape, is referred to
+the supremum of a χ²(df) process over the shape's search range, df = its coefficients
+(:func:`~.chisq.sup_chi2_sf`: the Euler characteristic tail, in one dimension Davies'
+bound; the range's curvatures from the geometry of the efficient score process at the
+current fit, :func:`shape_curvatures`). Counting the shapes in χ²(df) instead was off both ways: on
+clean 2-h cycles hysteresis's LR averaged 3.5 against χ²(3)'s 3, while temp_rate's LR was
+referred to χ²(2) where its tail is that of χ²(1) stretched by a lag range of length
+~1.3–1.5. temp_rate's test still fires at about twice its level (p < 0.05 in 10 and
+11 of 100 clean 6-h and 2-h runs; benchmarks/results/false_alarm.txt): with a lag beyond
+the drift's correlation time 1/β its lagged rate is nearly a change of the drift's thermal
+response time, so the refit moves β with it and its LR at a fixed lag is over-dispersed
+(mean 1.6–1.7 at τ = 300 s against χ²(1)'s 1, on clean 6-h cycles). Holding β at the
+current fit in that refit restored the level (5/100 and 4/100) but cost power on short
+runs (a hidden temp_rate on 1200 s lost its first rank to temp2; on a 1-h run its LR fell
+from 25.8 to 15.4), so it is not done. A joint diagnosis of several runs (a tuple of
+:class:`Samples`) takes the same test, its geometry on the joint model, for a shape the
+runs share; a per-run shape (a warm-up's τ, one process per run) keeps χ² with the shapes
+counted. Other candidates with a parameter not identified under the null
+(``temp_lag``'s τ, ``markov2``'s β₂) get one more degree of freedom and no halving: we
+measured false alarms of ``temp_lag`` at 2 of 4 seeds with χ²(1)/2 when ``temp_rate`` is in
+the model. ``Candidate.test`` names the reference distribution used; the df shown is the
+df used. Candidates are ranked by
+ΔBIC, best first (BIC's ln n per parameter prefers the simpler of two effects that fit
+alike — a trend over a warm-up with a very long time constant — where AIC would not). A
+shape parameter with a plain shape (``Param.default``: no lag, the standard width) that
+the data do not determine (at a search bound, or |estimate| < 2 std) is not counted in
+ΔAIC/ΔBIC: the fit is then the term's plain shape, whose one coefficient is what it adds
+(as in Laplace's approximation behind BIC, ln n per parameter is the price of a parameter
+the data pin down; one they leave free costs ~nothing). ``Candidate.n_params`` is the
+count used. The verdict is ``adequate`` when the innovations are white (Ljung–Box
+p ≥ 0.01) and no candidate is significant at 5 % after a Bonferroni correction for the
+number of candidates tried.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import threading
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ...errors import DataError, GyrostandError
+from ..chisq import chi2_sf, sup_chi2_sf
+from ..data import Samples
+from ..ml.fit import ml
+from ..ml.joint_problem import base_name
+from ..model import Model, context
+from ..results import DRIFT_UNIT, FitResult
+from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
+from ..validate import prepare
+from .diagnostics import Diagnosis, diagnose_fit, segments
+from .prederror import ModelError, model_error
+from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate, Report
+from .shapes import as_runs, shape_curvatures, shape_params
+
+log = logging.getLogger(__name__)
+
+#: fewest observed samples a diagnosis judges (Ljung–Box lags, candidate refits)
+MIN_DIAGNOSE_SAMPLES = 30
+#: most threads the candidate refits run on (at most one per CPU this process may use)
+MAX_THREADS = 4
+#: ln L rise that shows the current fit was not at its maximum
+REFIT_GAIN = 0.05
+#: the test's null hypothesis and the look-alikes are facts of each term
+#: (:attr:`~gyrostand.core.terms.base.Term.null`, ``look_alikes``): see :func:`_extra_df`,
+#: :func:`_halved` and :func:`look_alikes`
+FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, steps and "
+                   "long soaks, repeated")
+
+
+def candidate_terms(model: Model) -> list[str]:
+    """Known terms (built-in and plugins) not in ``model`` that can be added to it."""
+    have = set(model.names)
+    return [t for t in TERMS
+            if t not in have and all(r in have for r in TERMS[t].requires)]
+
+
+def _extra_df(term: str) -> int:
+    """One more degree of freedom for a term with a parameter not identified under the
+    null (Davies 1987): measured false alarms of ``temp_lag`` at 2 of 4 seeds without."""
+    return 1 if term_class(term).null == "nuisance" else 0
+
+
+def _determined(r: FitResult, name: str) -> bool:
+    """Whether the data determine a shape parameter of the fit ``r``: inside its search
+    range and known to better than half its value."""
+    e = r.parameters[name]
+    return name not in r.info.get("at_bound", ()) and abs(e.value) >= 2.0 * e.std
+
+
+def _halved(term: str) -> bool:
+    """The null on the boundary of the parameter space: ½χ²(0) + ½χ²(df)."""
+    return term_class(term).null == "boundary"
+
+
+def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
+    """ML fit of ``model``, started from ``base`` where it shares parameters; several runs
+    (a tuple of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
+    start = base.values if base is not None else None
+    if isinstance(samples, tuple):
+        from ..ml.joint import joint_ml
+
+        return joint_ml(samples, model, start=start,  # type: ignore[return-value]
+                        n_local=2 if base is not None else None, hessian_passes=1)
+    return ml(samples, model, start=start, n_local=2 if base is not None else None,
+              hessian_passes=1)
+
+
+def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:
+    """Whether ``term``'s candidate test is the calibrated supremum over its shape
+    (:func:`shape_params`); on several runs only if the shape is the gyro's (shared by the
+    runs: a per-run shape, a warm-up's τ, makes one process per run) or there is one
+    run."""
+    bigger = model.add(term)
+    shapes = shape_params(bigger, term)
+    if not shapes:
+        return False
+    return len(as_runs(samples)) == 1 or not any(
+        getattr(bigger.term_of(n), "per_run", False) for n in shapes)
+
+
+def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
+    """A shape parameter at a search bound where its shape is still physical (a thermal
+    lag of a few Δt: none measurable; :class:`~gyrostand.core.terms.base.Param`'s
+    ``physical_bounds``)."""
+    q = dict(model.params)[base_name(name)]  # a run's own copy (name@k): its term's
+    return any(f"ml: {name} is at its {side} search bound" in w
+               for side in q.physical_bounds for w in r.warnings)
+
+
+def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:
+    """Whether the effect a candidate adds is identified, and which of its time constants
+    or rates sit at a search bound (then the optimum is not an interior one; a shape
+    parameter at a bound where its shape is still physical does not count)."""
+    ok = True
+    for k in new:
+        e = r.parameters[k]
+        if model.kind(base_name(k)) == "linear" and not abs(e.value) >= 2.0 * e.std:
+            ok = False
+    if not any(model.kind(base_name(k)) == "linear" for k in new):
+        # an effect without a linear amplitude (a lag): its own parameter must be
+        # determined to better than half its value
+        for k in new:
+            if model.kind(base_name(k)) == "time" and not abs(r.parameters[k].value) >= 2.0 * r.parameters[k].std:
+                ok = False
+    for w in r.warnings:
+        if w.startswith("the likelihood is flat") and any(k in w for k in new):
+            ok = False
+    bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
+                  model.kind(base_name(k)) in POSITIVE_KINDS
+                  and not _physical_at_bound(model, r, k))
+    return ok, bound
+
+
+def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
+            ) -> list[tuple[FitResult | None, GyrostandError | None, float,
+                            tuple[float, ...]]]:
+    """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
+    that stopped it, seconds it took, the curvatures of its shape's range — ``()`` for a
+    candidate without a calibrated shape, :func:`shape_curvatures`), in the order of
+    ``terms``.
+
+    The refits are independent, so they run on a thread per CPU (at most
+    :data:`MAX_THREADS`): most of their time is in the compiled Kalman filter, which
+    releases the GIL (``nogil``), so the threads run on the cores side by side (the same
+    CPU time in all; wall clock ~1/CPUs of it on an idle machine). Each fit is the same
+    deterministic computation whichever thread runs it: the results do not depend on the
+    number of threads. BLAS is held to one thread around the pool (the algebra is on
+    tiny matrices; see :func:`~gyrostand.core.ml.fit.ml`).
+    """
+    def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float,
+                                tuple[float, ...]]:
+        t0 = time.perf_counter()
+        shaped = calibrated(samples, model, term)
+        try:
+            r = refit(samples, model.add(term), base)
+        except GyrostandError as exc:
+            return None, exc, time.perf_counter() - t0, ()
+        seconds = time.perf_counter() - t0
+        lkc: tuple[float, ...] = ()
+        if shaped:
+            lkc = shape_curvatures(samples, model, base, term)
+        return r, None, seconds, lkc
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    # in a worker thread (a Dask task: the batch runs one run per core already) one
+    # refit after the other, as ml's evaluator does
+    main = threading.current_thread() is threading.main_thread()
+    workers = min(len(terms), cpus or 1, MAX_THREADS) if main else 1
+    if workers <= 1:
+        return [one(t) for t in terms]
+    # the costliest first (more nonlinear parameters to search: a longer fit), so that the
+    # threads finish together
+    def searched(term: str) -> int:
+        bigger = model.add(term)
+        return sum(1 for k in bigger.param_names if k not in model.param_names
+                   and bigger.kind(k) in ("rate", "time", "std"))
+
+    order = sorted(range(len(terms)), key=lambda i: -searched(terms[i]))
+    with threadpool_limits(limits=1, user_api="blas"), \
+            ThreadPoolExecutor(max_workers=workers, thread_name_prefix="refit") as pool:
+        futures = {i: pool.submit(one, terms[i]) for i in order}
+        return [futures[i].result() for i in range(len(terms))]
+
+
+def rank_candidates(samples: Samples, model: Model, base: FitResult,
+                    terms: list[str] | None = None) -> list[Candidate]:
+    """Refit ``model + c`` for each candidate ``c``; ranked best first (ΔBIC, then p)."""
+    n = base.n_observed
+    out = []
+    todo = list(terms if terms is not None else candidate_terms(model))
+    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo),
+                                            strict=True):
+        bigger = model.add(term)
+        if r is None:
+            log.warning("candidate %s could not be fitted: %s", term, exc)
+            continue
+        assert base.loglik is not None and r.loglik is not None
+        # parameters the candidate adds (a per-run one once per run in a joint fit)
+        added = len(r.parameters) - len(base.parameters)
+        lr = max(2.0 * (r.loglik - base.loglik), 0.0)
+        new = [k for k in r.parameters if k not in base.parameters]
+        shapes = shape_params(bigger, term) if lkc else ()
+        if shapes:
+            # the supremum of a χ² process over the shape (not identified under the null)
+            df = added - len(shapes)
+            p = sup_chi2_sf(lr, df, lkc)
+            test = TEST_SUP
+        else:
+            df = added + _extra_df(term)
+            p = chi2_sf(lr, df)
+            test = TEST_CHI2_EXTRA if _extra_df(term) else TEST_CHI2
+            if _halved(term):
+                p *= 0.5
+                test = TEST_MIXTURE
+        # the parameters the fit uses: a shape parameter with a plain shape (its default:
+        # no lag, the standard width) that the data do not determine (at a bound, or
+        # flat) leaves the term that plain shape, and is not counted in ΔAIC/ΔBIC
+        plain = [k for k in shapes if dict(bigger.params)[k].default is not None]
+        used = added - sum(1 for k in plain if not _determined(r, k))
+        stochastic = TERMS[term].n_states > 0
+        ident, bound = identification(bigger, r, new) if not stochastic else (True, ())
+        if stochastic:
+            bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
+                          bigger.kind(base_name(k)) == "rate")
+        note = ""
+        if bound:
+            note = f"{', '.join(bound)} at a search bound: not ranked"
+        elif not ident:
+            note = "its effect is not identified (|estimate| < 2 std): not ranked"
+        out.append(Candidate(
+            term=term, lr_stat=lr, df=df, p_value=p, delta_aic=-lr + 2 * used,
+            delta_bic=-lr + used * float(np.log(n)), rms_after=r.residual_rms,
+            loglik_after=float(r.loglik), effect={k: r.parameters[k] for k in new},
+            seconds=seconds, result=r, identified=ident, at_bound=bound,
+            stochastic=stochastic, note=note, test=test, shape_lkc=lkc, n_params=used,
+        ))
+    out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
+    return out
+
+
+def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any]]:
+    """Significant candidates that explain the data about as well as the best one."""
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    if len(sig) < 2:
+        return []
+    best = min(sig, key=lambda c: c.delta_aic)
+    out = []
+    for c in sig:
+        if c is best:
+            continue
+        if c.delta_aic - best.delta_aic < max(4.0, 0.1 * abs(best.delta_aic)):
+            out.append({
+                "terms": [best.term, c.term],
+                "delta_aic": [best.delta_aic, c.delta_aic],
+                "advice": separation(best.term, c.term) or FALLBACK_ADVICE,
+            })
+    return out
+
+
+def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT) -> ModelError:
+    """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
+    used = prepare(samples, "model error")
+    return model_error(fit.model, fit.values, used, segments(context(used, None)), unit=unit)
+
+
+def _refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
+                           cands: list[Candidate], alpha_each: float) -> FitResult | None:
+    """The current model refitted from the optimum of each significant candidate whose
+    effect is not identified, with that effect at zero: a better fit of the current model
+    when its likelihood rises (the gain came from the current fit, not from the effect)."""
+    assert fit.loglik is not None
+    best = None
+    for c in cands:
+        if c.identified or c.p_value >= alpha_each or c.result is None:
+            continue
+        start = {k: v for k, v in c.result.values.items() if k in model.param_names}
+        try:
+            r = ml(samples, model, start=start)
+        except GyrostandError:
+            continue
+        assert r.loglik is not None
+        if r.loglik > fit.loglik + REFIT_GAIN and (best is None or r.loglik > (best.loglik or
+                                                                                -np.inf)):
+            best = r
+    return best
+
+
+#: deterministic candidates tried, in their order, against the best stochastic one
+COMPETITORS_TRIED = 3
+
+
+def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
+                            alpha_each: float) -> bool:
+    """Whether the stochastic candidate ``st`` explains the failure and the deterministic
+    ``d`` does not once ``st`` is in the model: both fitted together, each tested given the
+    other."""
+    both = model.add(d.term, st.term)
+    try:
+        assert d.result is not None
+        r = ml(samples, both, start=d.result.values, n_local=2)
+    except GyrostandError:
+        return False
+    if r.loglik is None:
+        return False
+    df_d = len(both.param_names) - len(model.add(st.term).param_names)
+    df_s = len(both.param_names) - len(model.add(d.term).param_names)
+    lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
+    lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
+    # here the shapes are counted in df: the curvatures of d's shape were measured under
+    # the current model, not with st in it (measured: with them, warm-up + (T − T0)²'s
+    # warm-up lost to random_walk, p(warmup | random_walk) 0.0077 vs 0.0063 needed)
+    p_d = chi2_sf(lr_d, df_d + _extra_df(d.term))
+    p_s = chi2_sf(lr_s, df_s + _extra_df(st.term))
+    if _halved(st.term):
+        p_s *= 0.5
+    log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
+             d.term, st.term, p_d, st.term, d.term, p_s)
+    return p_d >= alpha_each and p_s < alpha_each
+
+
+def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
+                       alpha_each: float) -> list[Candidate]:
+    """Physical explanations before random ones.
+
+    When a deterministic candidate d and a stochastic one s are both significant, both are
+    fitted together: d is proposed first unless it is no longer significant once s is in
+    the model while s still is once d is in; then the next deterministic candidate is tried
+    (up to :data:`COMPETITORS_TRIED`), and only when none survives is s the real one.
+    Either way the table says they compete; the other is tested again after the first is
+    added.
+    """
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    det = [c for c in sig if not c.stochastic]
+    sto = [c for c in sig if c.stochastic]
+    if not det or not sto:
+        return cands
+    st = sto[0]
+    # the deterministic candidates in their order, until one survives the stochastic one
+    # (a flexible effect, e.g. a lagged rate, may lose to it where the true one would not)
+    for d in det[:COMPETITORS_TRIED]:
+        if not _random_explains_better(samples, model, d, st, alpha_each):
+            first = d
+            break
+    else:
+        d = det[0]
+        first = st
+    other = st if first is d else d
+    why = "both explain the failure; proposed first" if first is d else \
+        "explains the failure better; proposed first"
+    marked = {d.term: dataclasses.replace(d, competes=st.term),
+              st.term: dataclasses.replace(st, competes=d.term)}
+    marked[first.term] = dataclasses.replace(marked[first.term], note=f"competes with "
+                                             f"{other.term}: {why}")
+    marked[other.term] = dataclasses.replace(
+        marked[other.term], note=f"competes with {first.term}: tested again after it")
+    rest = [marked.get(c.term, c) for c in cands if c.term not in (first.term, other.term)]
+    return [marked[first.term], marked[other.term], *rest]
+
+
+def _checks(fit: FitResult, samples: Samples, unit: str) -> tuple[Diagnosis, ModelError]:
+    """The residual diagnostics and the model error of ``fit``."""
+    return diagnose_fit(fit, samples), fit_error(fit, samples, unit)
+
+
+def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
+             alpha: float = 0.05, terms: list[str] | None = None,
+             unit: str = DRIFT_UNIT) -> Report:
+    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
+
+    A significant candidate whose effect is not identified sends the current model back to
+    a refit from that candidate's optimum; if the current fit rises, every candidate is
+    recomputed (at most twice) and a note says so.
+    """
+    if samples.n_observed < MIN_DIAGNOSE_SAMPLES:
+        raise DataError(
+            f"{samples.source}: {samples.n_observed} observed samples are too few to judge "
+            f"a model (diagnose needs at least {MIN_DIAGNOSE_SAMPLES})")
+    fit = base if base is not None else ml(samples, model)
+    first = fit
+    notes: list[str] = []
+    cands: list[Candidate] = []
+    with ExitStack() as stack:
+        # the residual checks and the model error of the current fit need no candidate:
+        # from the main thread they run beside the refits (filling the cores as they end)
+        early: Future | None = None
+        if threading.current_thread() is threading.main_thread():
+            side = stack.enter_context(
+                ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
+            early = side.submit(_checks, first, samples, unit)
+        for _ in range(3):
+            cands = rank_candidates(samples, model, fit, terms)
+            m = max(len(cands), 1)
+            alpha_each = alpha / m
+            better = _refit_from_candidates(samples, model, fit, cands, alpha_each)
+            if better is None or len(notes) >= 2:
+                break
+            assert better.loglik is not None and fit.loglik is not None
+            notes.append(f"the current fit was not at its maximum; refitted (ln L "
+                         f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate "
+                         "recomputed")
+            fit = better
+        m = max(len(cands), 1)
+        alpha_each = alpha / m
+        cands = _order_competitors(samples, model, cands, alpha_each)
+        if early is not None and fit is first:
+            diag, err = early.result()
+        else:
+            diag, err = _checks(fit, samples, unit)
+    reasons = []
+    if not diag.white:
+        reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
+                       f"over {diag.lags} lags)")
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    if sig:
+        reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} "
+                       f"(Bonferroni over {m} candidates: p < {alpha_each:.2g})")
+    if not err.at_floor():
+        h = err.headline()
+        reasons.append(
+            f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
+            f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
+            "the model does not predict the drift from the temperature")
+    return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
+                  adequate=not reasons, alpha=alpha,
+                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
+                  model_error=err, notes=tuple(notes), unit=unit)

@@ -1,0 +1,68 @@
+"""``diagnose`` of several runs of one gyro: the joint fit (:mod:`~gyrostand.core.ml.joint`),
+each run's residual check, and the missing effects ranked on the runs together."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from ..data import Samples
+from ..ml.joint import JointFit, joint_ml
+from ..model import Model
+from .candidates import rank_candidates
+
+__all__ = ["JointDiagnosis", "joint_diagnose", "WHITE_ALPHA"]
+
+
+@dataclass(frozen=True)
+class JointDiagnosis:
+    """``diagnose`` of several runs: the joint fit, each run's residual check, and the
+    missing effects ranked on the joint model (each candidate refitted jointly: its LR is
+    the joint LR, a per-run effect's parameters counted once per run)."""
+
+    fit: JointFit
+    candidates: tuple[Any, ...]  # candidates.Candidate, best first
+    alpha: float
+    adequate: bool
+    reasons: tuple[str, ...]
+    unit: str = "y"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": list(self.fit.model.names), "adequate": self.adequate,
+            "reasons": list(self.reasons), "alpha": self.alpha,
+            "fit": self.fit.to_dict(),
+            "repeatability": (self.fit.repeatability.to_dict()
+                              if self.fit.repeatability is not None else None),
+            "runs": [{"source": r.source, **dict(r.info.get("residual_check", {}))}
+                     for r in self.fit.runs],
+            "candidates": [c.to_dict(self.unit) for c in self.candidates],
+        }
+
+
+#: each run's whiteness test at this level (Bonferroni over the runs)
+WHITE_ALPHA = 0.01
+
+
+def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05,
+                   terms: list[str] | None = None, unit: str = "y") -> JointDiagnosis:
+    """Fit ``model`` to every run jointly, check each run's innovations, rank the missing
+    effects by their joint likelihood ratio (:func:`~.candidates.rank_candidates` on the
+    runs together)."""
+    fit = joint_ml(runs, model)
+    cands = rank_candidates(tuple(runs), model, fit, terms)  # type: ignore[arg-type]
+    alpha_each = alpha / max(len(cands), 1)
+    reasons = []
+    for r in fit.runs:
+        chk = r.info.get("residual_check", {})
+        if chk and chk["ljung_box_p"] < WHITE_ALPHA / len(runs):
+            reasons.append(f"run {r.info['run']} ({r.source}): innovations are not white "
+                           f"(Ljung–Box p = {chk['ljung_box_p']:.2g} over {chk['lags']} lags)")
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    if sig:
+        reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} on the "
+                       f"{len(runs)} runs together (Bonferroni over {len(cands)} candidates: "
+                       f"p < {alpha_each:.2g})")
+    return JointDiagnosis(fit=fit, candidates=tuple(cands), alpha=alpha,
+                          adequate=not reasons, reasons=tuple(reasons), unit=unit)

@@ -1,0 +1,119 @@
+"""What a diagnosis reports: each candidate term's test (:class:`Candidate`) and the
+diagnosis of a model on a data set (:class:`Report`), with the reference distributions a
+candidate's likelihood ratio is judged by (``Candidate.test``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..model import Model
+from ..results import DRIFT_UNIT, Estimate, FitResult, unit_text
+from .diagnostics import Diagnosis
+from .prederror import ModelError
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate term, refitted.
+
+    ``df`` is the degrees of freedom of the p-value, ``test`` its reference distribution
+    (:data:`TEST_CHI2` χ²(df), df the parameters the term adds; :data:`TEST_CHI2_EXTRA`
+    one more for a parameter not identified under the null; :data:`TEST_MIXTURE` the
+    boundary mixture; :data:`TEST_SUP` the supremum of a χ²(df) process over the shape,
+    df its coefficients, ``shape_lkc`` the curvatures of the shape's range).
+    ``n_params`` is the count of parameters in ΔAIC/ΔBIC. A candidate is *ranked* — can be
+    significant — only when its own effect is identified (``identified``: every linear
+    parameter it adds has |estimate| ≥ 2 std and no flat direction involves it) and no
+    time constant or rate of it sits at a search bound (``at_bound``). ``stochastic`` marks
+    a random process (markov2, random_walk); ``competes`` names the candidate of the other
+    kind that explains the same failure, ``note`` says why one is not ranked.
+    """
+
+    term: str
+    lr_stat: float
+    df: int
+    p_value: float
+    delta_aic: float
+    delta_bic: float
+    rms_after: float
+    loglik_after: float
+    effect: dict[str, Estimate]
+    seconds: float
+    result: FitResult | None = field(default=None, compare=False, repr=False)
+    identified: bool = True
+    at_bound: tuple[str, ...] = ()
+    stochastic: bool = False
+    competes: str | None = None
+    note: str = ""
+    test: str = "chi2"
+    shape_lkc: tuple[float, ...] = ()
+    n_params: int | None = None
+
+    @property
+    def ranked(self) -> bool:
+        return self.identified and not self.at_bound
+
+    def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
+        return {
+            "term": self.term, "lr_stat": self.lr_stat, "df": self.df,
+            "p_value": self.p_value, "delta_aic": self.delta_aic,
+            "delta_bic": self.delta_bic, "rms_after": self.rms_after,
+            "loglik_after": self.loglik_after,
+            "effect": {k: {**e.to_dict(), "unit": unit_text(e.unit, drift_unit)}
+                       for k, e in self.effect.items()},
+            "seconds": self.seconds, "ranked": self.ranked, "identified": self.identified,
+            "at_bound": list(self.at_bound), "stochastic": self.stochastic,
+            "competes": self.competes, "note": self.note, "test": self.test,
+            "shape_lkc": list(self.shape_lkc), "n_params": self.n_params,
+        }
+
+
+@dataclass(frozen=True)
+class Report:
+    """The diagnosis of a model on a data set: fit, residuals, ranked candidates, verdict."""
+
+    model: Model
+    fit: FitResult
+    diagnosis: Diagnosis
+    candidates: tuple[Candidate, ...]
+    adequate: bool
+    alpha: float
+    look_alikes: tuple[dict[str, Any], ...]
+    reasons: tuple[str, ...]
+    model_error: ModelError | None = None
+    notes: tuple[str, ...] = ()
+    unit: str = DRIFT_UNIT
+
+    @property
+    def significant(self) -> list[Candidate]:
+        """Ranked candidates significant after Bonferroni, in the order proposed."""
+        m = max(len(self.candidates), 1)
+        return [c for c in self.candidates if c.ranked and c.p_value < self.alpha / m]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": list(self.model.names),
+            "adequate": self.adequate,
+            "reasons": list(self.reasons),
+            "parameters": {k: {**e.to_dict(), "unit": unit_text(e.unit, self.unit)}
+                           for k, e in self.fit.parameters.items()},
+            "unit": self.unit,
+            "loglik": self.fit.loglik,
+            "residual": {"rms": self.diagnosis.rms,
+                         "ljung_box_p": self.diagnosis.ljung_box_p,
+                         **self.diagnosis.to_dict()},
+            "candidates": [c.to_dict(self.unit) for c in self.candidates],
+            "look_alikes": [dict(x) for x in self.look_alikes],
+            "alpha": self.alpha,
+            "warnings": list(self.fit.warnings),
+            **({"model_error": self.model_error.to_dict()} if self.model_error else {}),
+            "notes": list(self.notes),
+        }
+
+
+#: the reference distribution of a candidate's LR (``Candidate.test``)
+TEST_CHI2 = "chi2"  # χ²(df)
+TEST_MIXTURE = "chi2 mixture"  # ½χ²(0) + ½χ²(df): the null on a boundary
+TEST_CHI2_EXTRA = "chi2 +1 df"  # χ²(df), df with one more for a parameter unidentified
+TEST_SUP = "sup over shape"  # the supremum of a χ²(df) process over the shape (EC/Davies)

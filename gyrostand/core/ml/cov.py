@@ -1,0 +1,144 @@
+"""Standard errors of an ML fit: the observed information (numerical Hessian of ln L in
+the natural parameters), kept symmetric positive definite."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..data import Samples
+from ..model import Model
+from ..terms.base import POSITIVE_KINDS
+
+if TYPE_CHECKING:
+    from .fit import Problem
+    from .joint_problem import JointProblem
+
+
+def hessian(fun, x: np.ndarray, h: np.ndarray, evaluate=None) -> np.ndarray:
+    """Central-difference Hessian of ``fun`` at ``x`` with steps ``h``.
+
+    ``evaluate(fun, points)`` → values, in order (default: one after the other; the ML fit
+    passes a thread pool's map — the same values whichever way they are computed):
+
+        H_ii = (f(x + h_i) − 2 f(x) + f(x − h_i)) / h_i²
+        H_ij = (f(x + h_i + h_j) − f(x + h_i − h_j) − f(x − h_i + h_j) + f(x − h_i − h_j))
+               / (4 h_i h_j)
+    """
+    n = x.size
+    H = np.empty((n, n))
+    pts = [x]
+    for i in range(n):
+        e = np.zeros(n)
+        e[i] = h[i]
+        pts += [x + e, x - e]
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    for i, j in pairs:
+        ei = np.zeros(n)
+        ej = np.zeros(n)
+        ei[i], ej[j] = h[i], h[j]
+        pts += [x + ei + ej, x + ei - ej, x - ei + ej, x - ei - ej]
+    vals = evaluate(fun, pts) if evaluate is not None else [fun(q) for q in pts]
+    f0 = vals[0]
+    for i in range(n):
+        fp, fm = vals[1 + 2 * i], vals[2 + 2 * i]
+        H[i, i] = (fp - 2 * f0 + fm) / h[i] ** 2
+    for k, (i, j) in enumerate(pairs):
+        a, b, c, d = vals[1 + 2 * n + 4 * k: 5 + 2 * n + 4 * k]
+        v = (a - b - c + d)
+        H[i, j] = H[j, i] = v / (4 * h[i] * h[j])
+    return H
+
+
+def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray, list[str]]:
+    """Inverse of the observed information −H, kept symmetric positive definite.
+
+    Directions where the likelihood is flat or curved the wrong way are clipped to a tiny
+    curvature (a huge variance) and reported.
+    """
+    J = -0.5 * (H + H.T)
+    scale = np.sqrt(np.abs(np.diag(J)))
+    scale[scale == 0] = 1.0
+    Jn = J / np.outer(scale, scale)
+    lam, V = np.linalg.eigh(Jn)
+    warnings = []
+    floor = max(lam.max(), 1.0) * 1e-10
+    if lam.min() <= floor:
+        bad = V[:, lam <= floor]
+        involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
+        warnings.append(
+            "the likelihood is flat along a combination of "
+            f"{', '.join(involved)}: not identifiable from these data (their stds are huge)"
+        )
+        lam = np.maximum(lam, floor)
+    cov = (V / lam) @ V.T / np.outer(scale, scale)
+    return 0.5 * (cov + cov.T), warnings
+
+
+def observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
+                         gls_info: np.ndarray, prob: Problem | JointProblem,
+                         at_bound: list[str],
+                         passes: int = 2, evaluate=None):
+    """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
+
+    A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
+    maximum: the others' covariance is then taken with it held at its estimate, and its
+    own std is the inverse curvature along it alone. ``evaluate`` as :func:`hessian`.
+    """
+    x0 = np.array([p[n] for n in free])
+    noise_scale = max(p[n] for n in model.names_of_kind("std"))
+    lin_std = {}
+    if gls_info.size:
+        ginv = np.linalg.pinv(gls_info)
+        lin_std = {n: float(np.sqrt(max(ginv[i, i], 0.0))) for i, n in enumerate(prob.lin_free)}
+    h = np.empty(x0.size)
+    for i, n in enumerate(free):
+        kind = prob.kind(n)
+        if kind == "linear":
+            h[i] = 0.1 * lin_std.get(n, 0.0) or 1e-4 * max(abs(x0[i]), 1.0)
+        elif kind == "std":
+            h[i] = 1e-2 * max(abs(x0[i]), 0.1 * noise_scale)
+        else:
+            h[i] = 1e-3 * abs(x0[i])
+
+    def ll(x: np.ndarray) -> float:
+        q = dict(p)
+        for n, v in zip(free, x, strict=True):
+            q[n] = float(v)
+        for n in free:
+            if prob.kind(n) in POSITIVE_KINDS and q[n] <= 0:
+                return -np.inf
+        return prob.full_loglik(q)
+
+    warnings: list[str] = []
+    # a noise level whose removal costs no likelihood is at its boundary (≈ 0) too
+    ll0 = ll(x0)
+    at_bound = list(at_bound)
+    for i, n in enumerate(free):
+        if prob.kind(n) == "std" and n not in at_bound:
+            x = x0.copy()
+            x[i] = 0.0
+            if ll0 - ll(x) < 1e-3:
+                at_bound.append(n)
+    for _ in range(max(1, passes)):
+        H = hessian(ll, x0, h, evaluate)
+        if not np.all(np.isfinite(H)):
+            H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)
+        inner = [i for i, n in enumerate(free) if n not in at_bound]
+        cov = np.zeros((len(free), len(free)))
+        sub, warnings = covariance_from_hessian(H[np.ix_(inner, inner)], [free[i] for i in inner])
+        cov[np.ix_(inner, inner)] = sub
+        for i, n in enumerate(free):
+            if n in at_bound:
+                cov[i, i] = 1.0 / max(-H[i, i], 1e-300) if -H[i, i] > 0 else (0.1 * noise_scale) ** 2
+        sd = np.sqrt(np.diag(cov))
+        new_h = 0.1 * sd
+        for i, n in enumerate(free):
+            if prob.kind(n) in POSITIVE_KINDS:
+                new_h[i] = min(new_h[i], 0.05 * abs(x0[i]))
+            elif prob.kind(n) == "std":
+                new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))
+            new_h[i] = max(new_h[i], 1e-9 * max(abs(x0[i]), 1e-12))
+        h = new_h
+    return cov, warnings

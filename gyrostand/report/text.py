@@ -1,0 +1,477 @@
+"""Plain-text documents: the tables the commands print and a run folder's ``report.txt``.
+
+Byte for byte what the commands printed before the renderers were one package
+(``tests/render/golden``): widths, significant digits and wording are part of the contract
+that scripts reading the tables rely on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from ..core.diagnose.joint import JointDiagnosis
+from ..core.ml.joint import JointFit
+from ..core.results import FitResult
+from ..core.summary import fit_table, unit_text
+from . import ByKind
+from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
+
+if TYPE_CHECKING:
+    from ..core.diagnose.allan import AllanTable
+    from ..core.diagnose.prederror import ModelError
+    from ..core.diagnose.results import Report
+    from .views import GyroFinals
+
+__all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step", "allan",
+           "result_table", "run_summary", "run_report", "estimate", "SAME_SIGMA", "joint_fit",
+           "joint_diagnosis"]
+
+
+def estimate(value: float, std: float, unit: str, fixed: bool = False,
+             drift_unit: str = "y") -> str:
+    """``value ± std unit`` (``fixed`` for a held value), the unit as printed."""
+    sd = "fixed" if fixed else f"± {std:.3g}"
+    return f"{value:.6g} {sd} {unit_text(unit, drift_unit)}"
+
+
+# ---- identify ----------------------------------------------------------------------------
+
+def fit_result(r: FitResult) -> str:
+    """A readable table with units (``identify``): :meth:`FitResult.summary`'s
+    (:func:`gyrostand.core.summary.fit_table`)."""
+    return fit_table(r)
+
+
+# ---- diagnose ----------------------------------------------------------------------------
+
+def diagnosis(rep: Report, source: str) -> str:
+    """The verdict, model error, parameters, residual statistics, per-segment table and the
+    ranked candidates of one diagnosis of the data ``source``."""
+    d = rep.diagnosis
+    u = rep.unit
+    lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
+             f"verdict  {'ADEQUATE' if rep.adequate else 'NOT ADEQUATE'}"]
+    lines += [f"         - {r}" for r in rep.reasons]
+    lines += [f"note     {n}" for n in rep.notes]
+    if rep.model_error is not None:
+        lines.append("")
+        lines += model_error(rep.model_error)
+    lines.append("")
+    lines.append("parameters (ML)")
+    for k, e in rep.fit.parameters.items():
+        lines.append(f"  {k:<16} {estimate(e.value, e.std, e.unit, e.fixed, u)}")
+    lines.append("")
+    lines.append(f"residuals: RMS {d.rms:.4g} {u} (smoothed {d.smoothed_rms:.4g}), Ljung–Box "
+                 f"p = {d.ljung_box_p:.3g} over {d.lags} lags, normalized innovations "
+                 f"{d.nis_mean:.3f} (95 % band {d.nis_band[0]:.3f}–{d.nis_band[1]:.3f})")
+    lines.append("")
+    lines.append(f"per segment of the temperature profile (innovations, {u})")
+    lines.append(f"  {'kind':<8} {'t from':>8} {'t to':>8} {'T from':>7} {'T to':>7} "
+                 f"{'mean':>10} {'RMS':>10} {'smoothed':>10}")
+    for s in d.segments:
+        lines.append(f"  {s['kind']:<8} {s['t_start']:8.0f} {s['t_stop']:8.0f} "
+                     f"{s['temp_start']:7.2f} {s['temp_stop']:7.2f} {s['mean']:10.3g} "
+                     f"{s['rms']:10.3g} {s['smoothed_mean']:10.3g}")
+    lines.append("")
+    m = max(len(rep.candidates), 1)
+    lines.append(f"candidates, best first (significant: p < {rep.alpha / m:.2g}, "
+                 f"Bonferroni over {m})")
+    lines.append(f"  {'term':<12} {'LR':>8} {'df':>3} {'p':>9} {'ΔAIC':>8} {'ΔBIC':>8} "
+                 f"{'RMS after':>10}  effect")
+    for c in rep.candidates:
+        eff = "; ".join(f"{k} = {estimate(e.value, e.std, e.unit, False, u)}"
+                        for k, e in c.effect.items())
+        star = "*" if c.ranked and c.p_value < rep.alpha / m else " "
+        lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
+                     f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
+        if c.note:
+            lines.append(f"  {'':<12} ({c.note})")
+    if rep.candidates:
+        lines.append(f"  p from: {tests_used(rep.candidates)}")
+    for la in rep.look_alikes:
+        lines.append("")
+        lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
+                     f"equally well here (ΔAIC {la['delta_aic'][0]:.1f} vs "
+                     f"{la['delta_aic'][1]:.1f}); to separate them: "
+                     + (f"design the run that does:\n  {la['command']}" if "command" in la
+                        else la["advice"]))
+    if rep.candidates and not rep.adequate and rep.significant:
+        best = rep.significant[0]
+        lines.append("")
+        lines.append(f"next: gyrostand fit RUN --add {best.term}")
+    for w in rep.fit.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+def model_error(err: ModelError) -> list[str]:
+    """The headline model error and its table: open loop and h-step, per window."""
+    h = err.headline()
+    u = err.unit
+
+    def f(x: float | None, fmt: str = ".3g") -> str:
+        return "—" if x is None else format(x, fmt)
+
+    lines = [f"model error (open loop: measured − model driven by the temperature alone, "
+             f"{h['window_s']:g}-s means over the run): RMS {f(h['rms'])} {u}, floor "
+             f"{f(h['floor'])} {u} (what the model's own noise leaves), unexplained "
+             f"{f(h['unexplained'])} {u}, fit {f(h['fit_percent'], '.1f')} %"
+             + ("" if h["at_floor"] else "  << above its floor")]
+    lines.append(f"  {'prediction':<12} {'window':>7} {'RMS':>10} {'max':>10} {'floor':>10} "
+                 f"{'unexpl.':>10} {'fit %':>7}")
+    for hs in (0.0, *err.horizons_s):
+        name = "open loop" if hs == 0 else f"{hs:g}-s ahead"
+        for w in err.windows_s:
+            r = err.entries[(hs, w)][0]
+            lines.append(f"  {name:<12} {w:6g}s {f(r['rms']):>10} {f(r['max']):>10} "
+                         f"{f(r['floor']):>10} {f(r['unexplained']):>10} "
+                         f"{f(r['fit_percent'], '.1f'):>7}")
+    w = err.windows_s[0]
+    rows = err.entries[(0.0, w)]
+    if len(rows) > 1:
+        lines.append(f"  open loop per segment ({w:g}-s means, {u}): " + "; ".join(
+            f"{err.ranges[i]['kind']} {err.ranges[i]['t_start']:.0f}–"
+            f"{err.ranges[i]['t_stop']:.0f} s {f(rows[i]['rms'])}"
+            for i in range(1, len(rows)) if rows[i]["rms"] is not None))
+    return lines
+
+
+def _with_ledger(body: str, view: DiagnosisView | FitStepView) -> str:
+    return body + (f"\n\nledger: {view.ledger}" if view.ledger is not None else "")
+
+
+# ---- fit ---------------------------------------------------------------------------------
+
+def fit_step(view: FitStepView) -> str:
+    """Before and after of one model change side by side, the likelihood-ratio test."""
+    step = view.step
+    b, a = step.before, step.after
+    u = step.after_error.unit if step.after_error is not None else "y"
+    lines = [f"{'':<18} {'before':>30}   {'after':>30}",
+             f"{'model':<18} {','.join(b.model.names):>30}   {','.join(a.model.names):>30}"]
+    for k in dict.fromkeys(list(b.parameters) + list(a.parameters)):
+        pb, pa = b.parameters.get(k), a.parameters.get(k)
+        sb = estimate(pb.value, pb.std, pb.unit, pb.fixed, u) if pb else "—"
+        sa = estimate(pa.value, pa.std, pa.unit, pa.fixed, u) if pa else "—"
+        lines.append(f"{k:<18} {sb:>30}   {sa:>30}")
+    lines.append(f"{'log-likelihood':<18} {b.loglik:>30.3f}   {a.loglik:>30.3f}")
+    lines.append(f"{'residual RMS':<18} {b.residual_rms:>30.5g}   {a.residual_rms:>30.5g}")
+    eb, ea = step.before_error, step.after_error
+    if eb is not None and ea is not None:
+        u = ea.unit
+        lines.append(f"{'model error':<18} {eb.rms:>30.4g}   {ea.rms:>30.4g}")
+        lines.append(f"{'  its floor':<18} {eb.floor:>30.4g}   {ea.floor:>30.4g}")
+        hb, ha = eb.headline(), ea.headline()
+        lines.append(f"{'  unexplained':<18} {hb['unexplained'] or 0.0:>30.4g}   "
+                     f"{ha['unexplained'] or 0.0:>30.4g}")
+        lines.append(f"(model error: open-loop RMS of {hb['window_s']:g}-s means over the "
+                     f"run, {u}; floor: what the model's own noise leaves)")
+    change = (a.residual_rms / b.residual_rms - 1) * 100 if b.residual_rms else 0.0
+    lines.append("")
+    if step.df == 0:
+        lines.append(f"same number of parameters; 2 Δln L = {step.lr_stat:.2f}")
+    elif step.bigger_is_after:
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df, p = {step.p_value:.3g}"
+                     f" (adding {', '.join(step.added)} "
+                     f"{'improves' if step.p_value < 0.05 else 'does not significantly improve'}"
+                     f" the fit); residual RMS {change:+.2f} %")
+    else:
+        worse = step.p_value < 0.05
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df, p = {step.p_value:.3g}: "
+                     + ("removing it makes the fit significantly worse"
+                        if worse else "removing it costs no significant fit")
+                     + f"; residual RMS {change:+.2f} %")
+    if eb is not None and ea is not None and eb.rms > 0:
+        lines.append(f"model error {ea.rms / eb.rms * 100 - 100:+.1f} % "
+                     f"({eb.rms:.4g} → {ea.rms:.4g} {ea.unit})")
+    for w in a.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+# ---- allan -------------------------------------------------------------------------------
+
+#: conventional units of the figures for a drift in deg/h or deg/s: (unit, factor)
+CONVENTIONAL = {
+    "deg/h": {"angle_random_walk": ("deg/√h", 1 / 60), "rate_random_walk": ("deg/h/√h", 60.0)},
+    "deg/s": {"angle_random_walk": ("deg/√h", 60.0),
+              "rate_random_walk": ("deg/h/√h", 3600.0 * 60.0)},
+}
+ORDER = ("angle_random_walk", "bias_instability", "rate_random_walk", "rate_ramp")
+TITLES = {"angle_random_walk": "angle random walk", "bias_instability": "bias instability",
+          "rate_random_walk": "rate random walk", "rate_ramp": "rate ramp"}
+
+
+def allan_figure(table: AllanTable, name: str) -> list[str]:
+    """One figure of a table: value [lo, hi] unit at its τ, and in conventional units."""
+    f = table.figures[name]
+    if f.value == 0.0:
+        return ["not seen (its line fits as 0)"]
+    where = f"τ = {f.tau_read:g} s" if f.tau_read is not None else ""
+    lines = [f"{f.value:.4g} [{f.lo:.4g}, {f.hi:.4g}] {f.unit}" + (f", {where}" if where else "")]
+    conv = CONVENTIONAL.get(table.unit, {}).get(name)
+    if conv is not None:
+        u, k = conv
+        lines.append(f"= {f.value * k:.4g} [{f.lo * k:.4g}, {f.hi * k:.4g}] {u}")
+    return lines
+
+
+def allan(view: AllanView) -> str:
+    """The figures of each table side by side, with units and the reading τ."""
+    tables, gyro, dt = view.tables, view.gyro, view.dt
+    t0 = tables[0]
+    out = [f"Allan variance (IEEE Std 952 figures), gyro {gyro}: {t0.n} samples at "
+           f"Δt = {dt:g} s, τ {t0.tau[0]:g}..{t0.tau[-1]:g} s, "
+           f"{t0.level:.0%} confidence intervals (overlapping ADEV, EDF)", ""]
+    cells_of = {name: [allan_figure(t, name) for t in tables] for name in ORDER}
+    # a column as wide as its longest cell and 2 spaces (46 at least): cells never touch
+    width = max([46] + [len(x) + 2 for c in cells_of.values() for cell in c for x in cell])
+    out.append(f"{'':<22}" + "".join(f"{t.label:<{width}}" for t in tables))
+    for name in ORDER:
+        cells = cells_of[name]
+        sym = t0.figures[name].symbol
+        for row in range(max(len(c) for c in cells)):
+            head = f"{sym}  {TITLES[name]}" if row == 0 else ""
+            out.append(f"{head:<22}" + "".join(
+                f"{(c[row] if row < len(c) else ''):<{width}}" for c in cells).rstrip())
+    out.append("")
+    out.append("N: the τ^-1/2 line at τ = 1 s; B: the flat minimum / 0.664 at its τ; K: the "
+               "τ^+1/2 line at τ = 3 s;")
+    out.append("R: the τ^+1 line at τ = √2 s (a trend). Lines fitted jointly to σ²(τ); "
+               "intervals: χ² with the EDF")
+    out.append("of the τ where the term dominates (B: its minimum).")
+    for t in tables:
+        for w in t.warnings:
+            out.append(f"warning ({t.label}): {w}")
+    return "\n".join(out)
+
+
+# ---- the end of a run --------------------------------------------------------------------
+
+#: the batch refit's column is left out of the table when it is the online value within
+#: this many stds for every parameter (said in a line below the table)
+SAME_SIGMA = 0.05
+
+
+def result_table(final: GyroFinals, truth: Mapping[str, float] | None = None) -> str:
+    """One gyro's parameters: a column per method (value ± std), truth first if known.
+
+    ``lkf`` is the online LKF at stop (what the last CAN round sent), ``lkf_batch`` the
+    batch refit: shown only where it differs from ``lkf`` by more than ``SAME_SIGMA``."""
+    methods = list(final.fits)
+    same = same_fit(final.fits.get("lkf"), final.fits.get("lkf_batch"))
+    if same:
+        methods.remove("lkf_batch")
+    head = f"{'parameter':<14}" + (f" {'truth':>12}" if truth else "")
+    head += "".join(f" {m:>24}" for m in methods) + "  unit"
+    lines = [head]
+    for name in final.model.param_names:
+        row = f"{name:<14}"
+        if truth:
+            row += f" {truth[name]:>12.5g}" if name in truth else f" {'':>12}"
+        unit = ""
+        for m in methods:
+            f = final.fits[m]
+            if isinstance(f, FitResult) and name in f.parameters:
+                e = f.parameters[name]
+                unit = unit_text(e.unit, final.unit)
+                cell = f"{e.value:.5g} (held)" if e.fixed else f"{e.value:.5g} ± {e.std:.2g}"
+            else:
+                cell = "—"
+            row += f" {cell:>24}"
+        lines.append(f"{row}  {unit}")
+    rms = f"{'residual RMS':<14}" + (f" {'':>12}" if truth else "")
+    for m in methods:
+        f = final.fits[m]
+        rms += f" {f.residual_rms:>24.4g}" if isinstance(f, FitResult) else f" {'—':>24}"
+    lines.append(rms)
+    lk = final.fits.get("lkf")
+    if isinstance(lk, FitResult) and lk.info.get("online"):
+        lines.append(f"lkf = the online LKF at stop ({lk.info.get('variant', 'relin')}; "
+                     f"status {lk.info.get('status')}), as sent on the bus"
+                     + ("; lkf_batch (the same filter rerun over samples.csv) agrees "
+                        f"within {SAME_SIGMA:g} std" if same else ""))
+    for m in methods:
+        f = final.fits[m]
+        if isinstance(f, str):
+            lines.append(f"{m}: failed: {f}")
+        else:
+            lines += [f"{m}: warning: {w}" for w in f.warnings]
+    return "\n".join(lines)
+
+
+def same_fit(a: FitResult | str | None, b: FitResult | str | None) -> bool:
+    """Every parameter of ``b`` within ``SAME_SIGMA`` std of ``a``'s (held ones equal to
+    3 significant digits)."""
+    if not isinstance(a, FitResult) or not isinstance(b, FitResult):
+        return False
+    for n, e in b.parameters.items():
+        o = a.parameters.get(n)
+        if o is None:
+            return False
+        tol = SAME_SIGMA * max(e.std, o.std) if not (e.fixed or o.fixed) else \
+            1e-2 * max(abs(e.value), abs(o.value))
+        if abs(e.value - o.value) > tol:
+            return False
+    return True
+
+
+def run_summary(view: RunSummary) -> str:
+    """The final table of every gyro, the counts, and the paths (``run``, ``replay``)."""
+    outcome = view.outcome
+    dec = outcome.stats.get("decoder", {})
+    lines = [f"stopped: {outcome.stop_reason} (state {outcome.state}); frames "
+             f"{dec.get('received', 0)} received, {dec.get('decoded', 0)} decoded, "
+             f"{dec.get('rejected_total', 0)} rejected"]
+    for f in outcome.finals:
+        lines.append(f"\ngyro {f.gyro}: {f.bins} bins, {f.gaps} gaps")
+        lines.append(result_table(f, view.truths.get(f.gyro)))
+    lines.append(f"\nrun folder: {outcome.run_dir}")
+    for label, path in (("result:    ", outcome.result_json), ("report:    ", outcome.report)):
+        lines.append(f"{label} {path}" if path.is_file() else f"{label} not written")
+    for err in outcome.stats.get("unwritten", []):
+        lines.append(f"error: {err}")
+    return "\n".join(lines)
+
+
+def run_report(view: RunReport) -> str:
+    """``report.txt``: the counts of the run and the final table per gyro."""
+    stats = view.stats
+    dec = stats.get("decoder", {})
+    lines = [f"gyrostand run report: session {view.session} ({view.source})", "",
+             f"frames received {dec.get('received', 0)}, decoded {dec.get('decoded', 0)}, "
+             f"ignored {dec.get('ignored', 0)}, rejected {dec.get('rejected_total', 0)}, "
+             f"bus errors {dec.get('bus_errors', 0)}, counter jumps "
+             f"{dec.get('counter_jumps', 0)}"]
+    rej = {k: v for k, v in dec.get("rejected", {}).items() if v}
+    if rej:
+        lines.append("rejected by reason: " + ", ".join(f"{k} {v}" for k, v in rej.items()))
+    b = stats.get("binner", {})
+    lines.append(f"bins {b.get('bins', 0)} (gaps {b.get('gaps', 0)}), late samples "
+                 f"{b.get('late', 0)}, refused jumps {b.get('jumps', 0)}")
+    segs = stats.get("segments") or []
+    if len(segs) > 1:  # a resumed run: the counts above are the last segment's
+        tot = stats.get("run_totals", {})
+        td, tb = tot.get("decoder", {}), tot.get("binner", {})
+        lines.append(f"(the counts above are the last segment's) whole run, {len(segs)} "
+                     f"raw segments: frames received {td.get('received', 0)}, decoded "
+                     f"{td.get('decoded', 0)}, rejected {td.get('rejected_total', 0)}; bins "
+                     f"{tb.get('bins', 0)} (gaps {tb.get('gaps', 0)})")
+        for seg in segs:
+            sd = seg.get("decoder", {})
+            lines.append(f"  {seg.get('raw')}: {seg.get('state')}"
+                         f"{' (' + seg['ended_by'] + ')' if seg.get('ended_by') else ''}, "
+                         f"decoded {sd.get('decoded', 0)}, rows {seg.get('rows_written', 0)}")
+    for f in view.finals:
+        lines += ["", f"gyro {f.gyro}: model {','.join(f.model.names)}; {f.bins} bins, "
+                      f"{f.gaps} gaps, {f.observed} observed", ""]
+        lines.append(result_table(f, view.truths.get(f.gyro)))
+    lines += ["", "(y = the drift's unit, e.g. deg/h; ± one standard deviation)"]
+    return "\n".join(lines)
+
+
+def _report_page(page: ReportPage) -> str:
+    """The report's diagnosis as text (``report --format text``), its Allan tables after."""
+    s = page.subject
+    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})") + _allan_block(
+        page.allan)
+
+
+def _allan_block(view: AllanView | None) -> str:
+    """A diagnosis's Allan tables (:func:`allan`) after a blank line, when computed."""
+    return f"\n\n{allan(view)}" if view is not None else ""
+
+
+# ---- several runs of one gyro ---------------------------------------------------------
+
+def joint_fit(j: JointFit, drift_unit: str = "y") -> str:
+    """A joint fit of several runs: the shared parameters, each run's own ones and its
+    residual check, and the turn-on bias repeatability."""
+    lines = [f"method ml (joint, {len(j.runs)} runs)   model {','.join(j.model.names)}   "
+             f"samples {j.n_observed}", ""]
+    lines.append("shared parameters")
+    for k, e in j.shared.items():
+        lines.append(f"  {k:<16} {estimate(e.value, e.std, e.unit, e.fixed, drift_unit)}")
+    lines.append("")
+    own = [k for k in j.parameters if "@" in k]
+    names = list(dict.fromkeys(k.split("@", 1)[0] for k in own))
+    lines.append(f"{'run':>4} {'LB p':>8} {'NIS':>6}  " + "  ".join(f"{n:>26}" for n in names)
+                 + "  data")
+    for i, r in enumerate(j.runs):
+        chk = r.info.get("residual_check", {})
+        vals = "  ".join(f"{j.parameters[f'{n}@{i + 1}'].value:>13.6g} ± "
+                         f"{j.parameters[f'{n}@{i + 1}'].std:<10.3g}" for n in names)
+        lines.append(f"{i + 1:>4} {chk.get('ljung_box_p', float('nan')):>8.3g} "
+                     f"{chk.get('nis_mean', float('nan')):>6.3f}  {vals}  {r.source}")
+    rep = j.repeatability
+    if rep is not None:
+        lo, hi = rep.interval
+        u = unit_text(rep.unit, drift_unit)
+        lines += ["", f"turn-on repeatability of {rep.parameter}: spread {rep.spread:.4g} {u} "
+                  f"({rep.level:.0%} interval {lo:.4g} .. {hi:.4g}), mean {rep.mean:.6g} ± "
+                  f"{rep.mean_std:.3g}; equal biases: p = {rep.p:.2g}"]
+    lines += ["", f"log-likelihood {j.loglik:.6f} (sum over the runs)",
+              f"residual RMS   {j.residual_rms:.6g} {drift_unit}"]
+    lines += [f"warning: {w}" for w in j.warnings]
+    return "\n".join(lines)
+
+
+#: what each candidate test (``Candidate.test``) refers the LR to
+TEST_TEXT = {
+    "chi2": "χ²(df)",
+    "chi2 mixture": "½χ²(0) + ½χ²(df) (null on a boundary)",
+    "chi2 +1 df": "χ²(df), one df for a parameter unidentified under the null",
+    "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
+                      "characteristic; df = coefficients)",
+}
+
+
+def tests_used(cands: Any) -> str:
+    """Which reference distribution gave each candidate's p, grouped: ``χ²(df): trend,
+    temp2; sup over the shape ...: temp_rate, hysteresis``."""
+    groups: dict[str, list[str]] = {}
+    for c in cands:
+        groups.setdefault(c.test, []).append(c.term)
+    return "; ".join(f"{TEST_TEXT.get(t, t)}: {', '.join(terms)}"
+                     for t, terms in groups.items())
+
+
+def joint_diagnosis(d: JointDiagnosis) -> str:
+    """``diagnose`` of several runs: the verdict, the joint fit, the ranked candidates."""
+    lines = [f"model    {','.join(d.fit.model.names)}   ({len(d.fit.runs)} runs, joint)",
+             f"verdict  {'ADEQUATE' if d.adequate else 'NOT ADEQUATE'}"]
+    lines += [f"         - {r}" for r in d.reasons]
+    lines += ["", joint_fit(d.fit, d.unit), "",
+              "missing effects (each refitted on every run jointly; LR = joint LR)",
+              f"  {'term':<12} {'LR':>9} {'df':>3} {'p':>9} {'ΔBIC':>9}  note"]
+    for c in d.candidates:
+        lines.append(f"  {c.term:<12} {c.lr_stat:9.2f} {c.df:3d} {c.p_value:9.2g} "
+                     f"{c.delta_bic:9.1f}  {c.note}")
+    if d.candidates:
+        lines.append(f"  p from: {tests_used(d.candidates)}")
+    return "\n".join(lines)
+
+
+KINDS: dict[type, Callable[[Any], str]] = {
+    FitResult: fit_result,
+    JointFit: joint_fit,
+    JointDiagnosis: joint_diagnosis,
+    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source)
+                                          + _allan_block(v.allan), v),
+    FitStepView: lambda v: _with_ledger(fit_step(v), v),
+    AllanView: allan,
+    RunSummary: run_summary,
+    RunReport: run_report,
+    ReportPage: _report_page,
+}
+
+
+class TextRenderer(ByKind):
+    """Text: each kind's table, ending in a newline."""
+
+    def render(self, obj: Any) -> str:
+        return super().render(obj) + "\n"
+
+
+RENDERER = TextRenderer("text", KINDS)
