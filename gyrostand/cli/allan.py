@@ -11,7 +11,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..core.names import VOCABULARY
+from ..plugins import available_terms
 from ..runfolder.layout import RESULT
 from .common import add_format_args, emit
 
@@ -30,7 +30,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     p.add_argument("--model", default=None,
                    help="thermal model of the residual (comma-separated terms of: "
-                        f"{', '.join(VOCABULARY)}); default the run's current model")
+                        f"{', '.join(available_terms())}); default the run's current model")
     p.add_argument("--unit", default=None,
                    help="the drift's unit (default: the DBC signal's unit from the run's "
                         "session file, else 'y'); deg/h and deg/s add deg/√h, deg/h/√h")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..core.names import VOCABULARY
+from ..plugins import available_terms
 from .common import number
 from .design_program import limits_of, program_document, program_lines, write_files
 
@@ -29,7 +29,7 @@ def add_parser(sub: Any) -> None:
                         "parameters, and its own record is the reference (optional)")
     p.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     p.add_argument("--model", default=None,
-                   help=f"comma-separated terms of: {', '.join(VOCABULARY)} (default: the "
+                   help=f"comma-separated terms of: {', '.join(available_terms())} (default: the "
                         "run's current model)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter's current value (e.g. temp_rate.k=5); every parameter "

@@ -218,7 +218,8 @@ def test_a_model_terms_mask_wider_than_its_signal_is_refused_at_load_and_never_s
                        r"signal ModelTerms \(8 bits, max 255\) cannot carry the model markov, "
                        r"temp, trend \(mask 0x103 needs 9 bits\)"):
         load()
-    assert _cfg_with(tmp_path, narrow, model=["markov", "temp", "hysteresis"])()  # bit 7 fits
+    assert _cfg_with(tmp_path, narrow, model=["markov", "temp", "hysteresis"],
+                     identifiers=["lkf", "ml"])()  # bit 7 fits
     enc = FrameEncoder(cantools.database.load_string(narrow))
     with pytest.raises(CanEdgeError, match="cannot carry the model markov, trend"):
         enc.summary_frame("GS_SUMMARY_1", "ml", "ok", ["markov", "trend"], 10, 0.1)

@@ -84,7 +84,7 @@ def edf_overlapping(n: int, m: np.ndarray, noise: np.ndarray | str) -> np.ndarra
     (per m, or one for all); formulas in the module docstring.
 
     Examples:
-            >>> [round(float(e), 1) for e in edf_overlapping(1000, np.array([1, 10, 100]),
+        >>> [round(float(e), 1) for e in edf_overlapping(1000, np.array([1, 10, 100]),
         ...                                              "white")]
         [665.8, 146.2, 13.0]
     """
