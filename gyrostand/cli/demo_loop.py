@@ -107,8 +107,9 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     from ..report.views import DiagnosisView, FitStepView
     from ..session.offline import truth_params
     from ..workbench import open_subject, run_diagnose, run_fit
-    from .common import emit
+    from .common import emit, invocation
 
+    prog = invocation()
     term, params = HIDDEN
     hidden = with_hidden_effect(cfg, term, params)
     models = ", ".join(f"{g.name}: {','.join(g.model)}" for g in cfg.gyros)
@@ -126,26 +127,25 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     ok = True
     for g in cfg.gyros:
         subject = open_subject(run_dir, gyro=g.name)
-        step_header(2, f"where the model fails ({g.name})", f"gyrostand diagnose {run_dir}",
+        step_header(2, f"where the model fails ({g.name})", f"{prog} diagnose {run_dir}",
                     stream)
         before = run_diagnose(subject)
+        fit = f"{prog} fit {run_dir}"
         emit(DiagnosisView(before, f"{subject.samples.source} (gyro {g.name})",
-                           subject.ledger_path), "text", stream)
+                           subject.ledger_path, fit_command=fit), "text", stream)
         if before.adequate or not before.significant:
             print(f"{g.name}: the model is adequate: no effect to add", file=stream)
             ok = False
             continue
         add = before.significant[0].term
-        step_header(3, f"add what is missing: {add}", f"gyrostand fit {run_dir} --add {add}",
-                    stream)
+        step_header(3, f"add what is missing: {add}", f"{fit} --add {add}", stream)
         step = run_fit(subject, [add])
         emit(FitStepView(step, subject.ledger_path), "text", stream)
         subject = open_subject(run_dir, gyro=g.name)
-        step_header(4, "the verdict on the new model", f"gyrostand diagnose {run_dir}",
-                    stream)
+        step_header(4, "the verdict on the new model", f"{prog} diagnose {run_dir}", stream)
         after = run_diagnose(subject)
         emit(DiagnosisView(after, f"{subject.samples.source} (gyro {g.name})",
-                           subject.ledger_path), "text", stream)
+                           subject.ledger_path, fit_command=fit), "text", stream)
         found[g.name] = subject.model.names
         ok = ok and after.adequate and add == term
         err0, err1 = step.before_error, step.after_error
@@ -161,8 +161,8 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     nxt = adopted(hidden, found, seed=hidden.simulate.seed + 1)  # (checked: not None)
     second = daemon_run(nxt, out, stream, "run 2")
     print_outcome(second, stream, truth_params(hidden))
-    step_header(6, "the report: model vs measurements, the ledger", f"gyrostand report "
-                f"{run_dir}", stream)
+    step_header(6, "the report: model vs measurements, the ledger", f"{prog} report {run_dir}",
+                stream)
     for g in cfg.gyros:
         page = write_report(open_subject(run_dir, gyro=g.name))
         print(f"html report ({g.name}, the loop's ledger): {page}", file=stream)
