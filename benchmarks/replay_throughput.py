@@ -9,11 +9,11 @@ folder), then, in this one process:
   online LKF + LSQ per bin, samples/estimates CSVs, response frames built; the final batch
   fits (LSQ, LKF, ML per gyro) are timed separately. As ``gyrostand replay`` does by
   default for a log this size, python-can's reader runs in a reader process
-  (``gyrostand.can.logread``) while this process decodes, bins and estimates;
+  (``gyrostand.can.logs.reader``) while this process decodes, bins and estimates;
 * the same pipeline with the log parsed in this process (``--reader inline``), for
   comparison;
 * the array path, what ``gyrostand replay`` now does by default for a BLF: containers
-  parsed as arrays (``gyrostand.can.blfarray``), mapped signals extracted as arrays and
+  parsed as arrays (``gyrostand.can.logs.blfarray``), mapped signals extracted as arrays and
   the listener's rules applied to whole batches (``DecodingListener.receive_arrays``),
   in this process (stretch anchor: >= 2 x bare). The two lines above are the per-frame
   path (``GYROSTAND_PER_FRAME=1``), as measured before the array path existed; the
@@ -146,9 +146,10 @@ def ingest_only(cfg, path: Path, arrays: bool) -> tuple[float, list]:
     check, time and bin (gyrostand.can.replay.replay into an Ingest), nothing estimated
     or written; the array path or the per-frame one (log parsed in this process)."""
     from gyrostand.can.binning import Binner
-    from gyrostand.can.decode import ChannelMap, DecodingListener
     from gyrostand.can.ingest import Ingest
+    from gyrostand.can.receive.listener import DecodingListener
     from gyrostand.can.replay import replay
+    from gyrostand.can.routes import ChannelMap
 
     cm = ChannelMap.from_config(cfg)
     lst = DecodingListener(cfg.db, cm, capacity=cfg.sampling.buffer,

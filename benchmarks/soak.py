@@ -31,8 +31,8 @@ import can
 import numpy as np
 import yaml
 
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import FrameSimOptions, Truth, generate_frames
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import SessionConfig, parse_config
 from gyrostand.session.offline import run_replay, simulated_truths
 

@@ -1,5 +1,5 @@
 """Bins of Δt from frame timestamps (the numerics; ``samples.csv`` is written and read by
-:mod:`gyrostand.runfolder`, whose writer and reader are re-exported here).
+:mod:`gyrostand.runfolder`).
 
 Bin k covers ``[t0 + k·Δt, t0 + (k+1)·Δt)``; ``t0`` is the configured epoch, or else the
 first timestamp seen (any gyro) floored to a multiple of Δt, so every gyro shares one grid.
@@ -25,11 +25,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-# the run folder's samples table and durable writes (kept importable from here)
-from gyrostand.runfolder import SAMPLES_COLUMNS, SamplesWriter, datasync, read_samples_csv
-
-__all__ = ["Bin", "Binner", "BinStats", "SamplesWriter", "read_samples_csv", "SAMPLES_COLUMNS",
-           "datasync"]
+__all__ = ["Bin", "Binner", "BinStats"]
 
 log = logging.getLogger(__name__)
 

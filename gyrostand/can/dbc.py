@@ -19,7 +19,7 @@ from pathlib import Path
 import cantools
 from cantools.database.can import Database, Message
 
-from gyrostand.can.logread import EXTENDED_KEY_BIT
+from gyrostand.can.logs.frames import EXTENDED_KEY_BIT
 from gyrostand.errors import CanEdgeError
 
 __all__ = [

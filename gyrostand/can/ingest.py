@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from gyrostand.can.binning import Bin, Binner
-from gyrostand.can.decode import DecodingListener
+from gyrostand.can.receive.listener import DecodingListener
 
 __all__ = ["Ingest"]
 
@@ -31,7 +31,7 @@ class Ingest:
 
     def finish(self, until_t: float | None = None) -> list[Bin]:
         """End of run (or a timeout at frame time ``until_t``): settle the frames the
-        listener holds (:meth:`~gyrostand.can.decode.DecodingListener.settle`), pump,
+        listener holds (:meth:`~gyrostand.can.receive.listener.DecodingListener.settle`), pump,
         then flush."""
         if until_t is None:
             self.listener.settle()

@@ -6,7 +6,7 @@ layers of Python per call. The daemon encodes a few message types thousands of t
 replay of a 6-h log: ~10,000 result, summary and status frames). Here each signal's raw
 value still comes from cantools' own conversion (``numeric_scaled_to_raw``: the same
 scaling and rounding), and only the bit placement is ours, the inverse of
-:mod:`gyrostand.can.extract`'s extractors:
+:mod:`gyrostand.can.receive.extract`'s extractors:
 
     Intel signal, start bit s, length L:     N_little |= (raw & (2^L − 1)) << s
     Motorola signal, network start bit n:    N_big    |= (raw & (2^L − 1)) << (8·len − n − L)

@@ -37,8 +37,8 @@ from pathlib import Path
 
 import can
 
-from gyrostand.can.binning import datasync
 from gyrostand.errors import CanEdgeError, OutputError
+from gyrostand.runfolder import datasync
 
 __all__ = ["Recorder", "FlushingBLFWriter", "CommitFile"]
 

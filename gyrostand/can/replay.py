@@ -1,17 +1,17 @@
 """Replay of recorded logs through the live receive path.
 
-Logs are read by :mod:`gyrostand.can.logread` (anything :class:`can.LogReader` reads).
+Logs are read by :mod:`gyrostand.can.logs.read` (anything :class:`can.LogReader` reads).
 :func:`replay` hands each frame to the very listeners a live run attaches to its Notifier
 and pumps the same :class:`~gyrostand.can.ingest.Ingest`, so a log gives the bins the live
 run gave. All timing comes from frame timestamps; ``realtime=True`` only paces delivery
 (sleeping to frame time / ``speed``), it never changes the data.
 
 Log files replayed as fast as possible are read as arrays: a BLF's containers parsed
-whole (:mod:`gyrostand.can.blfarray`), batches of frames received by
-:meth:`~gyrostand.can.decode.DecodingListener.receive_arrays`, which applies the
+whole (:mod:`gyrostand.can.logs.blfarray`), batches of frames received by
+:meth:`~gyrostand.can.receive.listener.DecodingListener.receive_arrays`, which applies the
 per-frame path's rules to whole batches and hands the frames it cannot decide alone to
 the per-frame code. Other formats are parsed in a reader process
-(:class:`~gyrostand.can.logread.ReaderProcess`) while this process decodes, bins and
+(:class:`~gyrostand.can.logs.reader.ReaderProcess`) while this process decodes, bins and
 estimates. ``GYROSTAND_PER_FRAME=1`` forces the per-frame path (frames as tuples, or
 messages). Either way the frames reach the listener in the same order and the pumps
 fall after the same frames, so the bins, counts and rejections are identical (tested:
@@ -31,14 +31,8 @@ import can
 
 from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
-from gyrostand.can.logread import (
-    LogDamage,
-    ReaderProcess,
-    array_batches,
-    read_log,
-    read_logs,
-    read_logs_arrays,
-)
+from gyrostand.can.logs.read import LogDamage, read_log, read_logs, read_logs_arrays
+from gyrostand.can.logs.reader import ReaderProcess, array_batches
 
 __all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage",
            "per_frame_forced"]
@@ -84,16 +78,16 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     and at the end the flushed last bins.
 
     ``pump_every`` frames between pumps, at most what the listener's FIFO always holds
-    (:meth:`~gyrostand.can.decode.DecodingListener.frames_that_fit`): a replay never
+    (:meth:`~gyrostand.can.receive.listener.DecodingListener.frames_that_fit`): a replay never
     overflows it, whatever ``sampling.buffer`` is. ``parallel``: parse log files in a
     reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
     process may use two CPUs or more; never with ``realtime`` or extra ``listeners``,
     which take :class:`can.Message` objects; None also when every file is a BLF read as
     ``arrays``, whose parse is cheaper than a process). ``damage`` receives what reading the
-    log files skipped (:class:`~gyrostand.can.logread.LogDamage`). ``arrays``: log
+    log files skipped (:class:`~gyrostand.can.logs.read.LogDamage`). ``arrays``: log
     files are read as arrays (BLF containers parsed whole,
-    :func:`~gyrostand.can.logread.read_log_arrays`) and received through
-    :meth:`~gyrostand.can.decode.DecodingListener.receive_arrays`, in this process or the
+    :func:`~gyrostand.can.logs.read.read_log_arrays`) and received through
+    :meth:`~gyrostand.can.receive.listener.DecodingListener.receive_arrays`, in this process or the
     reader process (None: unless :func:`per_frame_forced`; never with ``realtime`` or
     extra ``listeners``); the bins, counts and rejections are the same either way.
     """

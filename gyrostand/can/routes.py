@@ -19,7 +19,7 @@ except ImportError:  # another cantools: decode_simple is used
 _decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 
-__all__ = ["ChannelMap"]
+__all__ = ["ChannelMap", "Route", "decoder"]
 
 
 @dataclass(frozen=True)
@@ -45,14 +45,16 @@ class ChannelMap:
         )
 
 
-class _Route:
-    """Fast-path entry for one frame id."""
+class Route:
+    """The receive path's entry for one frame id: its DBC message, decoder, payload
+    length, what it extracts per mapped signal, whether it is the command message, and
+    the timestamp of its last accepted frame (s)."""
 
     __slots__ = ("message", "decode", "length", "extract", "is_command", "last_t")
 
     def __init__(self, message, length: int) -> None:
         self.message = message
-        self.decode = _decoder(message)
+        self.decode = decoder(message)
         self.length = length
         # (gyro, channel, signal name, minimum, maximum, counter signal or None, modulus,
         #  (gyro, channel) as the counter's key)
@@ -62,7 +64,7 @@ class _Route:
         self.last_t = -math.inf
 
 
-def _decoder(message) -> Callable[[bytes | bytearray], dict]:
+def decoder(message) -> Callable[[bytes | bytearray], dict]:
     """``decode(data) -> {signal: value}`` of a DBC message: cantools' decoding, scaled,
     without choice names (what ``Message.decode_simple(data, decode_choices=False)``
     returns).

@@ -19,9 +19,9 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from ..can.binning import Bin, SamplesWriter
+from ..can.binning import Bin
 from ..errors import OutputError
-from ..runfolder import EstimatesWriter, write_atomic
+from ..runfolder import EstimatesWriter, SamplesWriter, write_atomic
 from ..runfolder.layout import ESTIMATES, SNAPSHOT
 from .online import GyroTracker
 from .resume import ResumeState

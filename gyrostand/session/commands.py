@@ -35,7 +35,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from ..can.bus import COMMANDS
-from ..can.decode import MALFORMED, REASONS
+from ..can.receive.commands import MALFORMED
+from ..can.receive.counts import REASONS
 
 __all__ = ["CommandProtocol", "Ack", "TokenBucket", "TRANSITIONS", "END_OF_RUN",
            "IDENTIFYING", "STATES", "IDLE", "RUNNING", "STOPPING", "STOPPED", "FAULT"]

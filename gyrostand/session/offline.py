@@ -21,10 +21,10 @@ import can
 import numpy as np
 
 from .. import progress
-from ..can.decode import ChannelMap
 from ..can.framesim import FrameSimOptions, Truth, generate_frames
-from ..can.logread import LogDamage, read_log
+from ..can.logs.read import LogDamage, read_log
 from ..can.replay import replay
+from ..can.routes import ChannelMap
 from ..config import SessionConfig
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile

@@ -37,13 +37,14 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from ..can.binning import Bin, Binner, SamplesWriter
+from ..can.binning import Bin, Binner
 from ..can.bus import COMMANDS
-from ..can.decode import ChannelMap, DecodingListener
 from ..can.ingest import Ingest
+from ..can.receive.listener import DecodingListener
+from ..can.routes import ChannelMap
 from ..config import SessionConfig
 from ..errors import GyrostandError, OutputError
-from ..runfolder import EstimatesWriter, SegmentLog
+from ..runfolder import EstimatesWriter, SamplesWriter, SegmentLog
 from ..runfolder.layout import RESULT
 from .acked import AckedFiles
 from .commands import CommandProtocol, TokenBucket

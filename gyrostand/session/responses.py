@@ -25,7 +25,8 @@ import can
 
 from ..can.binning import Binner
 from ..can.bus import FrameEncoder
-from ..can.decode import DecodeStats, DecodingListener
+from ..can.receive.counts import DecodeStats
+from ..can.receive.listener import DecodingListener
 from ..config import SessionConfig
 from .commands import Ack
 from .online import GyroTracker, OnlineEstimate

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from ..can.binning import read_samples_csv
 from ..errors import OutputError
+from ..runfolder import read_samples_csv
 from ..runfolder.layout import REPORT, RESULT
 from .commands import FAULT, STOPPED
 from .final import GyroFinal, fit_gyro, write_report, write_result_json
@@ -27,7 +27,7 @@ from .online import OnlineEstimate
 
 if TYPE_CHECKING:
     from ..can.binning import Binner
-    from ..can.decode import DecodingListener
+    from ..can.receive.listener import DecodingListener
     from ..config import SessionConfig
     from ..runfolder import SegmentLog
     from .acked import AckedFiles

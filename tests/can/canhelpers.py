@@ -11,8 +11,9 @@ import can
 import numpy as np
 
 from gyrostand.can.binning import Binner
-from gyrostand.can.decode import ChannelMap, DecodingListener
 from gyrostand.can.ingest import Ingest
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"

@@ -22,12 +22,12 @@ import pytest
 from canhelpers import ROOT, make_ingest, smooth_truth
 from test_extract import AWKWARD, DBCS, _plain_signals
 
-from gyrostand.can.blfarray import FrameArrays
-from gyrostand.can.decode import ChannelMap
-from gyrostand.can.extract import array_extractor
 from gyrostand.can.framesim import BadFrameInjector, FrameSimOptions, generate_frames, write_log
-from gyrostand.can.logread import frame_fields
+from gyrostand.can.logs.blfarray import FrameArrays
+from gyrostand.can.logs.frames import frame_fields
+from gyrostand.can.receive.extract import array_extractor
 from gyrostand.can.recorder import Recorder
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import load_config, parse_config
 from gyrostand.session.offline import run_replay
 
@@ -349,7 +349,7 @@ def test_cli_replay_per_frame_gives_the_same_run(tmp_path, monkeypatch, capsys):
 
 
 def test_reader_process_sends_the_same_frames_as_arrays(tmp_path):
-    from gyrostand.can.logread import ReaderProcess
+    from gyrostand.can.logs.reader import ReaderProcess
     from gyrostand.errors import CanEdgeError
 
     path = _log(TRIAD, tmp_path / "r.blf", _frames(TRIAD, n=40, seed=13), container=3000)

@@ -1,4 +1,4 @@
-"""BLF containers parsed as arrays (gyrostand.can.blfarray, issue 13's vectorized path):
+"""BLF containers parsed as arrays (gyrostand.can.logs.blfarray, issue 13's vectorized path):
 frame for frame python-can's BLFReader (timestamp to the bit, id, extended, error,
 remote, payload) on every kind of BLF the tests write, on crafted containers of every
 object type it reads (header versions 1 and 2, 10-µs and 1-ns ticks, padding, objects
@@ -17,17 +17,12 @@ from canhelpers import damaged, smooth_truth
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyrostand.can.blfarray import FrameArrays, parse_container
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import FrameSimOptions, generate_frames
-from gyrostand.can.logread import (
-    LogDamage,
-    _container_arrays,
-    frame_fields,
-    read_log,
-    read_log_arrays,
-)
+from gyrostand.can.logs.blfarray import FrameArrays, parse_container
+from gyrostand.can.logs.frames import frame_fields
+from gyrostand.can.logs.read import LogDamage, _container_arrays, read_log, read_log_arrays
 from gyrostand.can.recorder import Recorder
+from gyrostand.can.routes import ChannelMap
 
 
 def _exact(frames):

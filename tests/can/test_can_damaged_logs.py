@@ -16,10 +16,10 @@ from canhelpers import ROOT, damaged, smooth_truth
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import FrameSimOptions, generate_frames
-from gyrostand.can.logread import LogDamage, read_log
+from gyrostand.can.logs.read import LogDamage, read_log
 from gyrostand.can.recorder import Recorder
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import load_config
 from gyrostand.errors import CanEdgeError
 

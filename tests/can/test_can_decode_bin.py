@@ -13,8 +13,10 @@ from canhelpers import make_ingest, smooth_truth
 
 from gyrostand.can.binning import Binner, BinStats
 from gyrostand.can.bus import FrameEncoder
-from gyrostand.can.decode import REASONS, ChannelMap, DecodingListener
 from gyrostand.can.framesim import BadFrameInjector, FrameSimOptions, generate_frames
+from gyrostand.can.receive.counts import REASONS
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 
 T0 = 1_700_000_000.0
 
@@ -204,7 +206,7 @@ def test_route_decoder_is_cantools_decode_simple(dbc):
 
     import cantools
 
-    from gyrostand.can.decode import _decoder
+    from gyrostand.can.routes import decoder as _decoder
 
     root = Path(__file__).resolve().parents[2]
     db = cantools.database.load_file(root / dbc)

@@ -7,8 +7,8 @@ import numpy as np
 from canhelpers import make_ingest, smooth_truth
 
 from gyrostand.can.bus import FrameEncoder
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import BadFrameInjector, FrameSimOptions, generate_frames
+from gyrostand.can.routes import ChannelMap
 
 
 def test_foreign_dbc_live_end_to_end(foreign_cfg, rig_factory):

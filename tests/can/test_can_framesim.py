@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from canhelpers import make_ingest, smooth_truth
 
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import FrameSimOptions, Truth, generate_frames, send_frames
 from gyrostand.can.replay import replay
+from gyrostand.can.routes import ChannelMap
 
 T0 = 1_700_000_000.0
 

@@ -9,9 +9,7 @@ import can
 import pytest
 from canhelpers import make_ingest, smooth_truth
 
-from gyrostand.can.binning import SamplesWriter, read_samples_csv
 from gyrostand.can.bus import FrameEncoder
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import (
     BAD_KINDS,
     BadFrameInjector,
@@ -19,10 +17,12 @@ from gyrostand.can.framesim import (
     generate_frames,
     write_log,
 )
-from gyrostand.can.logread import LogDamage
+from gyrostand.can.logs.read import LogDamage
 from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import paced, read_log, replay
+from gyrostand.can.routes import ChannelMap
 from gyrostand.errors import CanEdgeError
+from gyrostand.runfolder import SamplesWriter, read_samples_csv
 
 T0 = 1_700_000_000.0
 
@@ -157,7 +157,7 @@ def test_reader_process_replay_equals_the_in_process_replay(triad_cfg, tmp_path)
 
 
 def test_reader_process_stops_when_the_consumer_does(demo_cfg, tmp_path):
-    from gyrostand.can.logread import ReaderProcess
+    from gyrostand.can.logs.reader import ReaderProcess
 
     path = tmp_path / "sim.blf"
     n = write_log(path, _sim(demo_cfg, n=60, drift_rate=200))
@@ -174,7 +174,7 @@ def test_reader_process_stops_when_the_consumer_does(demo_cfg, tmp_path):
 
 
 def test_reader_process_reports_errors_with_the_file(demo_cfg, tmp_path, caplog):
-    from gyrostand.can.logread import ReaderProcess
+    from gyrostand.can.logs.reader import ReaderProcess
 
     with pytest.raises(CanEdgeError, match="nope.blf: log file not found"):
         list(ReaderProcess([tmp_path / "nope.blf"]))

@@ -19,8 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gyrostand.can.bus import FrameEncoder
-from gyrostand.can.decode import ChannelMap, DecodingListener
 from gyrostand.can.framesim import FrameSimOptions, generate_frames
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import load_config, parse_config
 
 CFG = load_config(ROOT / "configs" / "demo.yaml")

@@ -1,4 +1,4 @@
-"""The precompiled extractors (:mod:`gyrostand.can.extract`) give cantools' values, to
+"""The precompiled extractors (:mod:`gyrostand.can.receive.extract`) give cantools' values, to
 the bit and of the same type, for every signal of every DBC the project ships or tests
 with, and for a DBC of deliberately awkward layouts; the listener uses them."""
 
@@ -12,8 +12,9 @@ import cantools
 import pytest
 
 from gyrostand.can.dbc import find_signal, load_dbc
-from gyrostand.can.decode import ChannelMap, DecodingListener
-from gyrostand.can.extract import extractor
+from gyrostand.can.receive.extract import extractor
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 
 ROOT = Path(__file__).resolve().parents[2]
 DBCS = sorted([*ROOT.glob("dbc/*.dbc"), *ROOT.glob("tests/data/*.dbc")])

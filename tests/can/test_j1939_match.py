@@ -13,7 +13,8 @@ import cantools
 import pytest
 
 from gyrostand.can.dbc import j1939_pgn
-from gyrostand.can.decode import ChannelMap, DecodingListener
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import parse_config
 from gyrostand.errors import ConfigError
 
@@ -97,7 +98,7 @@ def test_per_channel_match_equals_the_session_default():
 
 def test_matched_by_id_they_are_unknown_and_the_log_says_why_once(caplog):
     cfg = _cfg()
-    with caplog.at_level(logging.WARNING, logger="gyrostand.can.decode"):
+    with caplog.at_level(logging.WARNING, logger="gyrostand.can.receive.state"):
         listener = _send(_frames(cfg.db), cfg)
     st = listener.stats()
     assert st.decoded == 0 and st.rejected["unknown_id"] == 40

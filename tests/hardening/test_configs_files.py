@@ -24,11 +24,11 @@ import can
 import pytest
 import yaml
 
-from gyrostand.can.binning import read_samples_csv
 from gyrostand.can.replay import read_log
 from gyrostand.cli import main as cli_main
 from gyrostand.config import load_config
 from gyrostand.errors import ConfigError
+from gyrostand.runfolder import read_samples_csv
 from gyrostand.session.offline import run_replay, simulated_frames
 
 from .procs import DBC, DEMO, ROOT, Daemon, RemoteServer, write_config

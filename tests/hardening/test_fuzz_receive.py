@@ -22,7 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gyrostand.can.binning import Binner
-from gyrostand.can.decode import ChannelMap, DecodingListener
+from gyrostand.can.receive.listener import DecodingListener
+from gyrostand.can.routes import ChannelMap
 from gyrostand.config import load_config
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -15,13 +15,13 @@ import logging
 import can
 import pytest
 
-from gyrostand.can.binning import read_samples_csv
-from gyrostand.can.logread import LogDamage
+from gyrostand.can.logs.read import LogDamage
 from gyrostand.can.recorder import Recorder
 from gyrostand.can.replay import read_log
 from gyrostand.core.data import Samples
 from gyrostand.errors import DataError
 from gyrostand.report.series import read_estimates
+from gyrostand.runfolder import read_samples_csv
 from gyrostand.workbench import read_ledger
 
 

@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 from sessionhelpers import write_cfg_yaml
 
-from gyrostand.can.binning import SAMPLES_COLUMNS, read_samples_csv
 from gyrostand.can.framesim import write_log
 from gyrostand.cli import main
 from gyrostand.config import load_config
-from gyrostand.runfolder import read_estimates_csv
+from gyrostand.runfolder import SAMPLES_COLUMNS, read_estimates_csv, read_samples_csv
 from gyrostand.session.export import ExportError, export_parquet
 from gyrostand.session.offline import run_replay, simulated_frames
 

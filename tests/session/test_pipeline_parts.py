@@ -13,7 +13,7 @@ import pytest
 from sessionhelpers import make_cfg
 
 from gyrostand.can.bus import ACK_REASONS, COMMANDS, STATE_CODES
-from gyrostand.can.decode import REASONS, Counts, DecodeStats, Rejections
+from gyrostand.can.receive.counts import REASONS, Counts, DecodeStats, Rejections
 from gyrostand.errors import OutputError
 from gyrostand.session.commands import (
     END_OF_RUN,

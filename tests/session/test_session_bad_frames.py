@@ -12,8 +12,8 @@ import pytest
 from sessionhelpers import decode, make_cfg, run_virtual
 
 from gyrostand.can.bus import FrameEncoder
-from gyrostand.can.decode import ChannelMap
 from gyrostand.can.framesim import BAD_KINDS, BadFrameInjector
+from gyrostand.can.routes import ChannelMap
 from gyrostand.session.offline import run_replay, simulated_frames
 
 BURST = 2000

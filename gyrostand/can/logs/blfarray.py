@@ -32,10 +32,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FrameArrays", "parse_container", "SUPPORTED"]
+from gyrostand.can.logs.frames import ERROR_FRAME, EXTENDED_KEY_BIT, REMOTE_FRAME
 
-EXTENDED_KEY_BIT = 1 << 29  # as gyrostand.can.logread (not imported: no cycle)
-ERROR_FRAME, REMOTE_FRAME = 1, 2
+__all__ = ["FrameArrays", "parse_container", "SUPPORTED"]
 
 CAN_MESSAGE, CAN_MESSAGE2, CAN_ERROR_EXT, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64 = 1, 86, 73, 100, 101
 SUPPORTED = (CAN_MESSAGE, CAN_MESSAGE2, CAN_ERROR_EXT, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64)
@@ -65,7 +64,7 @@ class FrameArrays:
         return len(self.t)
 
     def frames(self, start: int = 0, stop: int | None = None) -> list:
-        """Frames ``start:stop`` as :data:`~gyrostand.can.logread.Frame` tuples (the
+        """Frames ``start:stop`` as :data:`~gyrostand.can.logs.frames.Frame` tuples (the
         payload as ``bytes`` of its length)."""
         d = self.data[start:stop]
         ls = self.length[start:stop].tolist()
@@ -81,7 +80,7 @@ class FrameArrays:
 
     @classmethod
     def from_frames(cls, frames: Sequence) -> FrameArrays:
-        """From :data:`~gyrostand.can.logread.Frame` tuples (payloads up to 64 bytes)."""
+        """From :data:`~gyrostand.can.logs.frames.Frame` tuples (payloads up to 64 bytes)."""
         n = len(frames)
         if n == 0:
             return cls.empty()

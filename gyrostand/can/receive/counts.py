@@ -1,7 +1,7 @@
 """The receive path's counters: what the listener counts, by name.
 
 :class:`Counts` and :class:`Rejections` are the running counters the
-:class:`~gyrostand.can.decode.DecodingListener` increments per frame (slotted dataclasses:
+:class:`~gyrostand.can.receive.listener.DecodingListener` increments per frame (slotted dataclasses:
 an increment costs what a list item's does); :class:`DecodeStats` is their snapshot, whose
 fields (and ``rejected``'s keys, :data:`REASONS`, in that order) are the JSON keys of
 ``stats.decoder`` in ``result.json`` and ``segments.json``.
