@@ -1,8 +1,11 @@
 """``gyrostand demo``: the stand simulator and the daemon in one process on python-can's
 ``virtual`` bus (``configs/demo.yaml``): the paper's 2000-s scenario sent as fast as the
-machine allows (frame timestamps still advance as on a real stand), then a stop command;
-prints the final table, the paths of result.json and the report, and writes the
-workbench's HTML report of each gyro."""
+machine allows (frame timestamps still advance as on a real stand), then a stop command.
+
+By default the simulated gyro has one effect more than the session's model, and the demo
+runs the workbench's loop on the run (:mod:`.demo_loop`): diagnose, fit with the missing
+effect, the verdict, the daemon's next run on the adopted model, the report. ``--clean``:
+the stand as configured, one run, its final table and the workbench's HTML report."""
 
 from __future__ import annotations
 
@@ -44,6 +47,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", default=None, metavar="DIR",
                    help="parent folder under which the run folder <name>-<UTC time>/ is "
                         "made (default: session.output)")
+    p.add_argument("--clean", action="store_true",
+                   help="the stand exactly as configured (no hidden effect): one run, its "
+                        "table and report, without the workbench's loop")
     add_bus_args(p)
     add_data_format_args(p)
     add_format_args(p, "the run's summary")
@@ -120,6 +126,13 @@ def _run(args: argparse.Namespace) -> int:
     sim = cfg.simulate
     if sim is None:
         raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    if not args.clean:
+        if args.format != "text":
+            raise ConfigError("demo: the loop prints text; use --clean for --format "
+                              f"{args.format}")
+        from .demo_loop import loop
+
+        return loop(cfg, args.out, sys.stdout)
     truths = truth_params(cfg)
     print(f"demo: session {cfg.name!r}, {len(cfg.gyros)} gyro(s) on "
           f"{cfg.bus.get('interface')}:{cfg.bus.get('channel')}; profile "

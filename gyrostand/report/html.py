@@ -94,8 +94,9 @@ def _estimate(value: float, std: float, unit: str, fixed: bool, drift: str) -> s
 
 # ---- a diagnosis: shared by the diagnose page and the report ------------------------------
 
-def verdict(rep: Report) -> str:
-    """The verdict, its reasons, and the next step when a candidate is significant."""
+def verdict(rep: Report, fit_command: str = "gyrostand fit RUN") -> str:
+    """The verdict, its reasons, and the next step when a candidate is significant
+    (``fit_command --add TERM``)."""
     cls, word = ("ok", "ADEQUATE") if rep.adequate else ("bad", "NOT ADEQUATE")
     out = [f'<p><span class="verdict {cls}">{word}</span></p>']
     if rep.reasons:
@@ -106,7 +107,7 @@ def verdict(rep: Report) -> str:
     out += [f'<p class="meta">Note: {e(n)}</p>' for n in rep.notes]
     if not rep.adequate and rep.significant:
         best = rep.significant[0]
-        out.append(f"<p>Next step: <code>gyrostand fit RUN --add {e(best.term)}</code> "
+        out.append(f"<p>Next step: <code>{e(fit_command)} --add {e(best.term)}</code> "
                    f"(residual RMS {num(rep.diagnosis.rms)} → {num(best.rms_after)}).</p>")
     return "\n".join(out)
 
@@ -189,8 +190,8 @@ def diagnosis(view: DiagnosisView) -> str:
     model = ",".join(rep.model.names)
     return page(f"gyrostand diagnosis: {model}", fill(
         "diagnosis.html", model=e(model), source=e(view.source), unit=e(rep.unit),
-        verdict=verdict(rep), parameters=parameters(rep), model_error=model_error(rep),
-        segments=segments(rep), candidates=candidates(rep), allan=allan_block(view.allan),
+        verdict=verdict(rep, view.fit_command), parameters=parameters(rep),
+        model_error=model_error(rep), segments=segments(rep), candidates=candidates(rep), allan=allan_block(view.allan),
         warnings=warnings(rep.fit.warnings)))
 
 

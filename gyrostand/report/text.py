@@ -45,9 +45,10 @@ def fit_result(r: FitResult) -> str:
 
 # ---- diagnose ----------------------------------------------------------------------------
 
-def diagnosis(rep: Report, source: str) -> str:
+def diagnosis(rep: Report, source: str, fit_command: str = "gyrostand fit RUN") -> str:
     """The verdict, model error, parameters, residual statistics, per-segment table and the
-    ranked candidates of one diagnosis of the data ``source``."""
+    ranked candidates of one diagnosis of the data ``source``; the next step, when a
+    candidate is significant, is ``fit_command --add TERM``."""
     d = rep.diagnosis
     u = rep.unit
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
@@ -99,7 +100,7 @@ def diagnosis(rep: Report, source: str) -> str:
     if rep.candidates and not rep.adequate and rep.significant:
         best = rep.significant[0]
         lines.append("")
-        lines.append(f"next: gyrostand fit RUN --add {best.term}")
+        lines.append(f"next: {fit_command} --add {best.term}")
     for w in rep.fit.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
@@ -457,7 +458,7 @@ KINDS: dict[type, Callable[[Any], str]] = {
     FitResult: fit_result,
     JointFit: joint_fit,
     JointDiagnosis: joint_diagnosis,
-    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source)
+    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source, v.fit_command)
                                           + _allan_block(v.allan), v),
     FitStepView: lambda v: _with_ledger(fit_step(v), v),
     AllanView: allan,

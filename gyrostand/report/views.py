@@ -82,6 +82,8 @@ class DiagnosisView:
     source: str
     ledger: Path | None = None
     allan: AllanView | None = None
+    #: the ``fit`` command of this data as the user can paste it (the next step)
+    fit_command: str = "gyrostand fit RUN"
 
     def to_dict(self) -> dict[str, Any]:
         return _with_allan(self.report.to_dict(), self.allan)

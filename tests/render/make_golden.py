@@ -5,7 +5,8 @@ quantized temperature) and on a replay of a simulated CAN log (300 s, jitter, dr
 ``python -m tests.render.make_golden`` (from the repository root) writes ``golden/``; the
 files there were made by this script on main c05478b, before the renderers were one package,
 and ``test_golden.py`` compares today's outputs with them byte for byte. Temporary paths
-print as ``<TMP>``, a run folder's wall-clock stamp as ``<STAMP>``, a
+print as ``<TMP>``, a run folder's wall-clock stamp as ``<STAMP>``, this interpreter's
+``-m gyrostand`` in a printed command as ``gyrostand``, a
 wall-clock duration as ``<S>``; the HTML report's time stamps (its own, the ledger's) as ``<NOW>``.
 """
 
@@ -98,7 +99,11 @@ def outputs(tmp: Path, only: Callable[[str], bool] = lambda _: True) -> dict[str
 
 
 def _mask(text: str, tmp: Path) -> str:
-    """Temporary paths, run-folder stamps and wall-clock durations (``"seconds"`` keys)."""
+    """Temporary paths, run-folder stamps, wall-clock durations (``"seconds"`` keys) and
+    this interpreter in a printed command (``<python> -m gyrostand``: ``gyrostand``)."""
+    import shlex
+
+    text = text.replace(f"{shlex.quote(sys.executable)} -m gyrostand", "gyrostand")
     text = re.sub(r"-\d{8}-\d{6}\b", "-<STAMP>", text.replace(str(tmp), "<TMP>"))
     return re.sub(r'"seconds": [0-9.e+-]+', '"seconds": <S>', text)
 

@@ -61,7 +61,7 @@ def test_demo_runs_from_another_folder(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert find_demo_config() == ROOT / "configs" / "demo.yaml" == DEMO
     cfg = _cfg(tmp_path, "gyrostand-cli-demo")
-    assert main(["demo", "--config", str(cfg), "--out", str(tmp_path / "d")]) == 0
+    assert main(["demo", "--clean", "--config", str(cfg), "--out", str(tmp_path / "d")]) == 0
     out = capsys.readouterr().out
     assert "stop acknowledged" in out and "stopped: stop command" in out
     assert "truth" in out and "report:" in out
@@ -69,6 +69,36 @@ def test_demo_runs_from_another_folder(tmp_path, capsys, monkeypatch):
     assert re.search(r"numba: (every kernel loaded from its cache \(nothing compiled\)|"
                      r"first run: \d+ kernel compilation\(s\) in [\d.]+ s \(.+\)); "
                      r"demo [\d.]+ s in all", out)
+
+
+def test_the_demo_runs_the_loop_the_product_exists_for(tmp_path, capsys):
+    """The default demo: a hidden effect (temp2) on the stand; diagnose says NOT ADEQUATE
+    with temp2 first; fit --add temp2 cuts the open-loop error by >= 70 %; the verdict is
+    then ADEQUATE; the daemon's next run on the adopted model estimates temp2.gamma2
+    online within 4 std of the truth; the truth is named only at the end."""
+    cfg = write_cfg_yaml(tmp_path / "s.yaml", tmp_path / "runs",
+                         {"interface": "virtual", "channel": "gyrostand-cli-loop",
+                          "preserve_timestamps": True}, rates={"drift": 20, "temperature": 10})
+    assert main(["demo", "--config", str(cfg), "--out", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    steps = [out.index(f"=== {k}.") for k in range(1, 7)]
+    assert steps == sorted(steps)
+    diagnose1, fit, diagnose2, run2 = (out[steps[k]:steps[k + 1]] for k in range(1, 5))
+    assert "temp2" not in out[:steps[1]]  # the truth is not shown before the end
+    assert "verdict  NOT ADEQUATE" in diagnose1
+    first = re.search(r"^\* (\w+) ", diagnose1, re.M)
+    assert first and first.group(1) == "temp2"
+    assert "--add temp2" in fit and "temp2.gamma2" in fit
+    fall = re.search(r"open-loop model error ([\d.]+) -> ([\d.]+) deg/h", out)
+    assert fall and float(fall.group(2)) <= 0.3 * float(fall.group(1))
+    assert "verdict  ADEQUATE" in diagnose2
+    row = re.search(r"^temp2\.gamma2\s+(\S+)\s+(\S+) ± (\S+)", run2, re.M)
+    assert row, run2
+    truth, value, std = (float(x) for x in row.groups())
+    assert truth == -2e-4 and abs(value - truth) <= 4 * std
+    assert "lkf = the online LKF at stop" in run2
+    assert out.count("html report (az") == 2
+    assert "the loop found it, and the model with it is ADEQUATE" in out
 
 
 def test_the_compile_clock_counts_a_compilation_and_names_it():

@@ -1,0 +1,177 @@
+"""The demo's loop (``gyrostand demo``): the mission on the virtual bus, end to end.
+
+The simulated stand's gyro has one physical effect more than the session's model holds
+(:data:`HIDDEN`, named only at the end, as the truth). The loop is what a test-stand
+engineer does with a run:
+
+1. the daemon's run on the session's model (the stand simulator on the virtual bus);
+2. ``gyrostand diagnose RUN``: NOT ADEQUATE, the missing effect ranked first, where the
+   model fails (the open-loop error above its floor);
+3. ``gyrostand fit RUN --add TERM``: the effect added, the error before and after, a
+   ledger step;
+4. ``gyrostand diagnose RUN`` again: the verdict on the new model;
+5. the model adopted: the daemon's next run (a new stand record) on it, with its online
+   LKF estimating the added effect bin by bin;
+6. the report of the first run, its ledger figure showing the error fall.
+
+Each step is the command's own code (the workbench's steps and renderers), printed as the
+command prints it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from types import MappingProxyType
+from typing import Any, TextIO
+
+from ..config import SessionConfig
+from ..errors import ConfigError
+
+#: the demo's hidden effect: a quadratic temperature response of the drift
+#: (``temp2``, γ₂ in drift units per s·degC²: see ``docs/terms.md``), one an engineer meets
+#: as a sensitivity that changes with temperature
+HIDDEN: tuple[str, dict[str, float]] = ("temp2", {"temp2.gamma2": -2e-4})
+
+
+def with_hidden_effect(cfg: SessionConfig, term: str, params: dict[str, float]
+                       ) -> SessionConfig:
+    """``cfg`` whose simulated gyros have ``term`` (with ``params``) in their truth, the
+    session's models unchanged."""
+    sim = cfg.simulate
+    if sim is None:
+        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    gyros = {name: dataclasses.replace(
+        g, model=g.model if term in g.model else (*g.model, term),
+        params=MappingProxyType({**g.params, **params})) for name, g in sim.gyros.items()}
+    return dataclasses.replace(cfg, simulate=dataclasses.replace(
+        sim, gyros=MappingProxyType(gyros)))
+
+
+def adopted(cfg: SessionConfig, models: dict[str, tuple[str, ...]], seed: int
+            ) -> SessionConfig:
+    """``cfg`` with each gyro's model replaced by its adopted one (the identifiers that
+    cannot identify it left out, as the session loader leaves them out), and the stand's
+    next record (``seed``)."""
+    from ..core import registry
+    from ..core.model import Model
+
+    gyros = []
+    for g in cfg.gyros:
+        names = tuple(n for n in models.get(g.name, g.model) if n != "white")
+        m = Model.parse(list(names))
+        idents = tuple(i for i in g.identifiers if registry.get(i).refusal(m) is None)
+        gyros.append(dataclasses.replace(g, model=names, identifiers=idents))
+    sim = cfg.simulate
+    return dataclasses.replace(cfg, gyros=tuple(gyros), simulate=(
+        dataclasses.replace(sim, seed=seed) if sim is not None else None))
+
+
+def daemon_run(cfg: SessionConfig, out: str | None, stream: TextIO, label: str) -> Any:
+    """One run of the daemon against the simulated stand; returns its outcome."""
+    from ..session.live import run_live
+    from ..session.offline import simulated_frames, truth_params
+    from ..session.stand import SimulatedStand
+
+    sim = cfg.simulate
+    if sim is None:
+        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    ready, stop = threading.Event(), threading.Event()
+    stand = SimulatedStand(cfg, simulated_frames(cfg), ready, stop)
+    stand.start()
+    t0 = time.monotonic()
+    outcome = run_live(cfg, out=out, on_ready=lambda _d: ready.set(), stop_event=stop,
+                       truths=truth_params(cfg))
+    wall = time.monotonic() - t0
+    stand.join(5)
+    if stand.error is not None:
+        raise stand.error
+    ack = stand.ack
+    print(f"{label}: the stand sent {stand.sent} frames; the daemon ran {wall:.1f} s wall "
+          f"for {sim.duration or sim.temperature[-1][0]:g} s of frame time; stop "
+          + ("acknowledged" if ack and ack.get("Result") == 0 else "not acknowledged"),
+          file=stream, flush=True)
+    return outcome
+
+
+def step_header(n: int, text: str, command: str, stream: TextIO) -> None:
+    print(f"\n=== {n}. {text}\n    $ {command}\n", file=stream, flush=True)
+
+
+def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
+    """The loop on every gyro of ``cfg`` (the demo session has one); 0 when it ends
+    ADEQUATE with the effect found, else 1."""
+    from ..cli.common import print_outcome
+    from ..report import write_report
+    from ..report.views import DiagnosisView, FitStepView
+    from ..session.offline import truth_params
+    from ..workbench import open_subject, run_diagnose, run_fit
+    from .common import emit, invocation
+
+    prog = invocation()
+    term, params = HIDDEN
+    hidden = with_hidden_effect(cfg, term, params)
+    models = ", ".join(f"{g.name}: {','.join(g.model)}" for g in cfg.gyros)
+    print(f"demo: the stand's gyro has one physical effect more than the session's model "
+          f"({models}); the workbench finds it (the truth is named at the end)",
+          file=stream, flush=True)
+    step_header(1, "the daemon's run on the session's model", "gyrostand run SESSION",
+                stream)
+    first = daemon_run(hidden, out, stream, "run 1")
+    print_outcome(first, stream, truth_params(cfg))
+    if not first.ok:
+        return 1
+    run_dir = first.run_dir
+    found: dict[str, tuple[str, ...]] = {}
+    ok = True
+    for g in cfg.gyros:
+        subject = open_subject(run_dir, gyro=g.name)
+        step_header(2, f"where the model fails ({g.name})", f"{prog} diagnose {run_dir}",
+                    stream)
+        before = run_diagnose(subject)
+        fit = f"{prog} fit {run_dir}"
+        emit(DiagnosisView(before, f"{subject.samples.source} (gyro {g.name})",
+                           subject.ledger_path, fit_command=fit), "text", stream)
+        if before.adequate or not before.significant:
+            print(f"{g.name}: the model is adequate: no effect to add", file=stream)
+            ok = False
+            continue
+        add = before.significant[0].term
+        step_header(3, f"add what is missing: {add}", f"{fit} --add {add}", stream)
+        step = run_fit(subject, [add])
+        emit(FitStepView(step, subject.ledger_path), "text", stream)
+        subject = open_subject(run_dir, gyro=g.name)
+        step_header(4, "the verdict on the new model", f"{prog} diagnose {run_dir}", stream)
+        after = run_diagnose(subject)
+        emit(DiagnosisView(after, f"{subject.samples.source} (gyro {g.name})",
+                           subject.ledger_path, fit_command=fit), "text", stream)
+        found[g.name] = subject.model.names
+        ok = ok and after.adequate and add == term
+        err0, err1 = step.before_error, step.after_error
+        if err0 is not None and err1 is not None:
+            print(f"{g.name}: open-loop model error {err0.rms:.3g} -> {err1.rms:.3g} "
+                  f"{subject.unit} ({100 * (1 - err1.rms / err0.rms):.0f} % less) with "
+                  f"{add}", file=stream)
+    step_header(5, "the adopted model on the daemon's next run (its online LKF included)",
+                "gyrostand run SESSION   # with model: "
+                + "; ".join(f"{k}: [{', '.join(n for n in v if n != 'white')}]"
+                            for k, v in found.items())
+                + " (the demo hands it to the daemon in memory)", stream)
+    nxt = adopted(hidden, found, seed=hidden.simulate.seed + 1)  # (checked: not None)
+    second = daemon_run(nxt, out, stream, "run 2")
+    print_outcome(second, stream, truth_params(hidden))
+    step_header(6, "the report: model vs measurements, the ledger", f"{prog} report {run_dir}",
+                stream)
+    for g in cfg.gyros:
+        page = write_report(open_subject(run_dir, gyro=g.name))
+        print(f"html report ({g.name}, the loop's ledger): {page}", file=stream)
+    if second.ok:
+        for f in second.finals:
+            page = write_report(open_subject(second.run_dir, gyro=f.gyro))
+            print(f"html report ({f.gyro}, the adopted model's run): {page}", file=stream)
+    truth = ", ".join(f"{k} = {v:g}" for k, v in params.items())
+    print(f"\nthe truth: the stand's gyro had {term} ({truth}) beside the session's model; "
+          + ("the loop found it, and the model with it is ADEQUATE" if ok else
+             "the loop did not end where it should (see above)"), file=stream)
+    return 0 if ok and second.ok else 1
