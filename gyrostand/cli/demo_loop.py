@@ -158,7 +158,10 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
                 + "; ".join(f"{k}: [{', '.join(n for n in v if n != 'white')}]"
                             for k, v in found.items())
                 + " (the demo hands it to the daemon in memory)", stream)
-    nxt = adopted(hidden, found, seed=hidden.simulate.seed + 1)  # (checked: not None)
+    sim = hidden.simulate
+    if sim is None:  # (with_hidden_effect refused it first)
+        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    nxt = adopted(hidden, found, seed=sim.seed + 1)
     second = daemon_run(nxt, out, stream, "run 2")
     print_outcome(second, stream, truth_params(hidden))
     step_header(6, "the report: model vs measurements, the ledger", f"{prog} report {run_dir}",
