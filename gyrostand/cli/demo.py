@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -117,9 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from ..config import load_config
-    from ..session.live import run_live
-    from ..session.offline import simulated_frames, truth_params
-    from ..session.stand import SimulatedStand
+    from ..session.offline import truth_params
 
     cfg = with_data_formats(with_bus_overrides(load_config(args.config or find_demo_config()),
                                                args), args)
@@ -140,21 +137,9 @@ def _run(args: argparse.Namespace) -> int:
           f"{sim.duration or sim.temperature[-1][0]:g} s; truth "
           + "; ".join(f"{g}: " + ", ".join(f"{k}={v:g}" for k, v in p.items())
                       for g, p in truths.items()), file=progress(args), flush=True)
-    ready, stop = threading.Event(), threading.Event()
-    stand = SimulatedStand(cfg, simulated_frames(cfg), ready, stop)
-    stand.start()
-    t0 = time.monotonic()
-    outcome = run_live(cfg, out=args.out, on_ready=lambda _d: ready.set(), stop_event=stop,
-                       truths=truths)
-    wall = time.monotonic() - t0
-    stand.join(5)
-    if stand.error is not None:
-        raise stand.error
-    ack = stand.ack
-    print(f"simulated stand sent {stand.sent} frames; daemon ran {wall:.1f} s wall for "
-          f"{sim.duration or sim.temperature[-1][0]:g} s of frame time; stop "
-          + ("acknowledged" if ack and ack.get("Result") == 0 else "not acknowledged"),
-          file=progress(args))
+    from .demo_loop import daemon_run
+
+    outcome = daemon_run(cfg, args.out, progress(args), "demo")
     print_outcome(outcome, sys.stdout, truths, format=args.format)
     if outcome.ok:
         # the workbench's page on the run: model vs measurements, residuals, candidates
