@@ -40,7 +40,7 @@ True
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import fields, replace
+from dataclasses import fields, is_dataclass, replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -71,6 +71,26 @@ class Identifier:
     reports_online: ClassVar[bool] = False
     #: one line for the command line's help
     help: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """An identifier's contract, checked when its class is defined: a ``name``, an
+        ``Options`` dataclass, a ``help`` line and its own :meth:`fit`; an ``online`` one
+        also its own :meth:`track`. A gap is a :class:`ModelError` naming it."""
+        super().__init_subclass__(**kwargs)
+        gaps = []
+        if not isinstance(getattr(cls, "name", None), str):
+            gaps.append("name (its name in identifiers:, --method and the CAN tables)")
+        if not is_dataclass(getattr(cls, "Options", None)):
+            gaps.append("Options (a frozen dataclass of its options)")
+        if not cls.help:
+            gaps.append("help (one line for the command line)")
+        if cls.fit is Identifier.fit:
+            gaps.append("fit() (the batch fit)")
+        if cls.online and cls.track is Identifier.track:
+            gaps.append("track() (it says it runs online)")
+        if gaps:
+            raise ModelError(f"identifier {cls.__module__}.{cls.__qualname__} lacks what "
+                             f"an identifier must state: {'; '.join(gaps)}")
 
     def check(self, model: Model) -> None:
         """Raise :class:`ModelError` naming the term this identifier cannot handle."""

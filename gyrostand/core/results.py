@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from .model import Model
-from .summary import DRIFT_UNIT, UNIT_TEXT, fit_table, unit_text
+from .summary import DRIFT_UNIT, fit_table, unit_text
 
-__all__ = ["Estimate", "FitResult", "DRIFT_UNIT", "UNIT_TEXT", "unit_text"]
+__all__ = ["Estimate", "FitResult"]
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from ..core.data import Samples
 from ..core.diagnose.diagnostics import allan_deviation
 from ..core.diagnose.results import Report
-from ..core.results import DRIFT_UNIT, unit_text
+from ..core.summary import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 
 WIDTH = 10.0  # in; at DPI 100 -> 1000 px

@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.diagnose.joint import JointDiagnosis
 from ..core.ml.joint import JointFit
-from ..core.results import FitResult, unit_text
+from ..core.results import FitResult
+from ..core.summary import unit_text
 from . import ByKind
 from . import text as _text
 from .views import AllanView, DiagnosisView, FitStepView, Plot, ReportPage, RunReport, RunSummary

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..can.bus import STATUS_CODES
 from ..core.model import Model
-from ..core.results import UNIT_TEXT
+from ..core.summary import UNIT_TEXT
 from ..errors import DataError, GyrostandError, OutputError
 from ..runfolder import (
     SAMPLES_COLUMNS,

@@ -18,7 +18,8 @@ from ..core.diagnose.prederror import ModelError
 from ..core.diagnose.results import Report
 from ..core.ml.fit import ml
 from ..core.model import Model
-from ..core.results import DRIFT_UNIT, FitResult
+from ..core.results import FitResult
+from ..core.summary import DRIFT_UNIT
 from ..errors import GyrostandError, OutputError
 from .ledger import append_ledger
 from .subject import Subject

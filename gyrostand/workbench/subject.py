@@ -25,7 +25,7 @@ from typing import Any
 
 from ..core.data import Samples
 from ..core.model import Model
-from ..core.results import DRIFT_UNIT
+from ..core.summary import DRIFT_UNIT
 from ..errors import DataError, GyrostandError
 from ..runfolder import LEDGER, csv_ledger_path, read_result, samples_path
 from .ledger import read_ledger

@@ -151,3 +151,29 @@ def test_every_online_identifier_runs_behind_one_interface_and_ends_at_the_batch
             assert abs(v - b.value) <= tol, (name, k, v, b.value)
     with pytest.raises(ModelError, match="ml does not run online"):
         get("ml").track(m, 1.0)
+
+
+def test_an_identifier_states_its_facts_when_its_class_is_defined():
+    """The identifier's contract is checked at class definition, naming what is missing."""
+    from gyrostand.core.options import LsqOptions
+    from gyrostand.core.registry import Identifier
+
+    with pytest.raises(ModelError, match=r"lacks what an identifier must state: name .*; "
+                                         r"Options .*; help .*; fit\(\)"):
+        class Nothing(Identifier):
+            pass
+
+    with pytest.raises(ModelError, match=r"track\(\) \(it says it runs online\)"):
+        class Online(Identifier):
+            name, Options, help, online = "online_test", LsqOptions, "a test", True
+
+            def fit(self, samples, model, options=None):
+                raise NotImplementedError
+
+    class Batch(Identifier):
+        name, Options, help = "batch_test", LsqOptions, "a test"
+
+        def fit(self, samples, model, options=None):
+            raise NotImplementedError
+
+    assert Batch().name == "batch_test"

@@ -67,7 +67,8 @@ from ..data import Samples
 from ..ml.fit import ml
 from ..ml.joint_problem import base_name
 from ..model import Model, context
-from ..results import DRIFT_UNIT, FitResult
+from ..results import FitResult
+from ..summary import DRIFT_UNIT
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from ..validate import prepare
 from .diagnostics import Diagnosis, diagnose_fit, segments

@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..model import Model
-from ..results import DRIFT_UNIT, Estimate, FitResult, unit_text
+from ..results import Estimate, FitResult
+from ..summary import DRIFT_UNIT, unit_text
 from .diagnostics import Diagnosis
 from .prederror import ModelError
 
