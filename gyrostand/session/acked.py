@@ -1,6 +1,6 @@
 """Acknowledged writing: the run files the daemon writes while it runs.
 
-Per gyro ``samples.csv`` (the closed bins, :class:`~gyrostand.can.binning.SamplesWriter`)
+Per gyro ``samples.csv`` (the closed bins, :class:`~gyrostand.runfolder.SamplesWriter`)
 and ``estimates.csv`` (the online estimates after each bin,
 :class:`~gyrostand.runfolder.EstimatesWriter`), plus ``snapshot.json`` on command.
 Rows wait in memory until :meth:`AckedFiles.flush`, which first commits the raw log
