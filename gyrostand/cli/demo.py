@@ -117,18 +117,15 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..session.offline import truth_params
+    from .demo_loop import daemon_run, loop, simulate_section
 
     cfg = with_data_formats(with_bus_overrides(load_config(args.config or find_demo_config()),
                                                args), args)
-    sim = cfg.simulate
-    if sim is None:
-        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    sim = simulate_section(cfg)
     if not args.clean:
         if args.format != "text":
             raise ConfigError("demo: the loop prints text; use --clean for --format "
                               f"{args.format}")
-        from .demo_loop import loop
-
         return loop(cfg, args.out, sys.stdout)
     truths = truth_params(cfg)
     print(f"demo: session {cfg.name!r}, {len(cfg.gyros)} gyro(s) on "
@@ -137,8 +134,6 @@ def _run(args: argparse.Namespace) -> int:
           f"{sim.duration or sim.temperature[-1][0]:g} s; truth "
           + "; ".join(f"{g}: " + ", ".join(f"{k}={v:g}" for k, v in p.items())
                       for g, p in truths.items()), file=progress(args), flush=True)
-    from .demo_loop import daemon_run
-
     outcome = daemon_run(cfg, args.out, progress(args), "demo")
     print_outcome(outcome, sys.stdout, truths, format=args.format)
     if outcome.ok:

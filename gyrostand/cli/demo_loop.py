@@ -26,7 +26,7 @@ import time
 from types import MappingProxyType
 from typing import Any, TextIO
 
-from ..config import SessionConfig
+from ..config import SessionConfig, SimulateConfig
 from ..errors import ConfigError
 
 #: the demo's hidden effect: a quadratic temperature response of the drift
@@ -35,13 +35,19 @@ from ..errors import ConfigError
 HIDDEN: tuple[str, dict[str, float]] = ("temp2", {"temp2.gamma2": -2e-4})
 
 
+def simulate_section(cfg: SessionConfig) -> SimulateConfig:
+    """``cfg``'s ``simulate:`` section; a :class:`ConfigError` naming it when the file has
+    none (the demo needs the simulator)."""
+    if cfg.simulate is None:
+        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    return cfg.simulate
+
+
 def with_hidden_effect(cfg: SessionConfig, term: str, params: dict[str, float]
                        ) -> SessionConfig:
     """``cfg`` whose simulated gyros have ``term`` (with ``params``) in their truth, the
     session's models unchanged."""
-    sim = cfg.simulate
-    if sim is None:
-        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    sim = simulate_section(cfg)
     gyros = {name: dataclasses.replace(
         g, model=g.model if term in g.model else (*g.model, term),
         params=MappingProxyType({**g.params, **params})) for name, g in sim.gyros.items()}
@@ -63,9 +69,8 @@ def adopted(cfg: SessionConfig, models: dict[str, tuple[str, ...]], seed: int
         m = Model.parse(list(names))
         idents = tuple(i for i in g.identifiers if registry.get(i).refusal(m) is None)
         gyros.append(dataclasses.replace(g, model=names, identifiers=idents))
-    sim = cfg.simulate
-    return dataclasses.replace(cfg, gyros=tuple(gyros), simulate=(
-        dataclasses.replace(sim, seed=seed) if sim is not None else None))
+    return dataclasses.replace(cfg, gyros=tuple(gyros), simulate=dataclasses.replace(
+        simulate_section(cfg), seed=seed))
 
 
 def daemon_run(cfg: SessionConfig, out: str | None, stream: TextIO, label: str) -> Any:
@@ -74,9 +79,7 @@ def daemon_run(cfg: SessionConfig, out: str | None, stream: TextIO, label: str) 
     from ..session.offline import simulated_frames, truth_params
     from ..session.stand import SimulatedStand
 
-    sim = cfg.simulate
-    if sim is None:
-        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
+    sim = simulate_section(cfg)
     ready, stop = threading.Event(), threading.Event()
     stand = SimulatedStand(cfg, simulated_frames(cfg), ready, stop)
     stand.start()
@@ -158,10 +161,7 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
                 + "; ".join(f"{k}: [{', '.join(n for n in v if n != 'white')}]"
                             for k, v in found.items())
                 + " (the demo hands it to the daemon in memory)", stream)
-    sim = hidden.simulate
-    if sim is None:  # (with_hidden_effect refused it first)
-        raise ConfigError(f"{cfg.path}: simulate: missing (the demo needs the simulator)")
-    nxt = adopted(hidden, found, seed=sim.seed + 1)
+    nxt = adopted(hidden, found, seed=simulate_section(hidden).seed + 1)
     second = daemon_run(nxt, out, stream, "run 2")
     print_outcome(second, stream, truth_params(hidden))
     step_header(6, "the report: model vs measurements, the ledger", f"{prog} report {run_dir}",

@@ -24,7 +24,16 @@ from ..core.results import FitResult
 from ..core.summary import unit_text
 from . import ByKind
 from . import text as _text
-from .views import AllanView, DiagnosisView, FitStepView, Plot, ReportPage, RunReport, RunSummary
+from .views import (
+    FIT_RUN,
+    AllanView,
+    DiagnosisView,
+    FitStepView,
+    Plot,
+    ReportPage,
+    RunReport,
+    RunSummary,
+)
 
 if TYPE_CHECKING:
     from ..core.diagnose.results import Report
@@ -95,7 +104,7 @@ def _estimate(value: float, std: float, unit: str, fixed: bool, drift: str) -> s
 
 # ---- a diagnosis: shared by the diagnose page and the report ------------------------------
 
-def verdict(rep: Report, fit_command: str = "gyrostand fit RUN") -> str:
+def verdict(rep: Report, fit_command: str = FIT_RUN) -> str:
     """The verdict, its reasons, and the next step when a candidate is significant
     (``fit_command --add TERM``)."""
     cls, word = ("ok", "ADEQUATE") if rep.adequate else ("bad", "NOT ADEQUATE")

@@ -15,7 +15,7 @@ from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import fit_table, unit_text
 from . import ByKind
-from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
+from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
@@ -45,7 +45,7 @@ def fit_result(r: FitResult) -> str:
 
 # ---- diagnose ----------------------------------------------------------------------------
 
-def diagnosis(rep: Report, source: str, fit_command: str = "gyrostand fit RUN") -> str:
+def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
     """The verdict, model error, parameters, residual statistics, per-segment table and the
     ranked candidates of one diagnosis of the data ``source``; the next step, when a
     candidate is significant, is ``fit_command --add TERM``."""

@@ -73,6 +73,10 @@ class RunEnd(Protocol):
     def stats(self) -> Mapping[str, Any]: ...
 
 
+#: a diagnosis's next step where nothing says how the data was named (``--add TERM`` follows)
+FIT_RUN = "gyrostand fit RUN"
+
+
 @dataclass(frozen=True)
 class DiagnosisView:
     """A diagnosis (``diagnose``): ``source`` names the data (e.g. ``run.csv (gyro az)``),
@@ -83,7 +87,7 @@ class DiagnosisView:
     ledger: Path | None = None
     allan: AllanView | None = None
     #: the ``fit`` command of this data as the user can paste it (the next step)
-    fit_command: str = "gyrostand fit RUN"
+    fit_command: str = FIT_RUN
 
     def to_dict(self) -> dict[str, Any]:
         return _with_allan(self.report.to_dict(), self.allan)
