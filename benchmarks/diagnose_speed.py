@@ -16,8 +16,9 @@ import time
 import numpy as np
 
 from gyrostand.core.data import Samples
-from gyrostand.core.diagnose.candidates import diagnose, fit_error, rank_candidates
+from gyrostand.core.diagnose.candidates import rank_candidates
 from gyrostand.core.diagnose.diagnostics import diagnose_fit
+from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from ..core.data import Samples
-from ..core.diagnose.candidates import fit_error
 from ..core.diagnose.results import Report
+from ..core.diagnose.verdict import fit_error
 from ..core.lkf.filter import estimated_names, held_names, lkf, lkf_layout
 from ..core.ml.fit import ml
 from ..errors import GyrostandError
@@ -309,7 +309,8 @@ def ledger_points(steps: list[dict[str, Any]], report: Report,
         c = report.significant[0]
         e_c = f_c = math.nan
         if samples is not None and c.result is not None:
-            ce = fit_error(c.result, samples, err.unit if err is not None else "y")
+            ce = fit_error(c.result, samples, err.unit if err is not None else "y",
+                           getattr(report, "reference", None))
             e_c, f_c = ce.rms, ce.floor
         pts.append(LedgerPoint(f"if +{c.term}", tuple(report.model.names) + (c.term,),
                                c.rms_after, c.loglik_after, (), what_if=True,

@@ -15,6 +15,7 @@ from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import fit_table, unit_text
 from . import ByKind
+from .lackfit import reference
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
@@ -58,6 +59,9 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
     if rep.model_error is not None:
         lines.append("")
         lines += model_error(rep.model_error)
+    if rep.reference is not None:
+        lines.append("")
+        lines += reference(rep.reference, u)
     lines.append("")
     lines.append("parameters (ML)")
     for k, e in rep.fit.parameters.items():
@@ -101,6 +105,10 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
         best = rep.significant[0]
         lines.append("")
         lines.append(f"next: {fit_command} --add {best.term}")
+    elif rep.reference is not None and rep.reference.significant and not rep.significant:
+        lines.append("")
+        lines.append("next: write a plugin term of the shape the reference shows (README: "
+                     "plugins), then fit --add it")
     for w in rep.fit.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)

@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from ..core.design.separation import design_command
-from ..core.diagnose.candidates import diagnose, fit_error
 from ..core.diagnose.prederror import ModelError
+from ..core.diagnose.reference import reference_fit
 from ..core.diagnose.results import Report
+from ..core.diagnose.verdict import diagnose, fit_error
 from ..core.ml.fit import ml
 from ..core.model import Model
 from ..core.results import FitResult
@@ -156,9 +157,12 @@ def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (
     new = changed_model(subject.model, add, remove)
     before = ml(subject.samples, subject.model)
     after = ml(subject.samples, new, start=before.values)
-    step = fit_step(before, after, add, remove,
-                    before_error=fit_error(before, subject.samples, subject.unit),
-                    after_error=fit_error(after, subject.samples, subject.unit))
+    # each floor from its fit's saturated reference (a misfit cannot inflate it, so the
+    # floor does not fall with the error)
+    errors = {f"{k}_error": fit_error(r, subject.samples, subject.unit,
+                                      reference_fit(subject.samples, r.model, r))
+              for k, r in (("before", before), ("after", after))}
+    step = fit_step(before, after, add, remove, **errors)
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

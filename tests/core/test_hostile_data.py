@@ -104,7 +104,7 @@ def test_lkf_recovers_after_the_gap():
 def test_diagnose_a_short_record(n):
     """Fewer samples than the 60 cross-correlation lags: fewer lags, no crash (below 30
     samples diagnose refuses to judge: tests/workbench/test_verdicts.py)."""
-    from gyrostand.core.diagnose.candidates import diagnose
+    from gyrostand.core.diagnose.verdict import diagnose
 
     s = simulate(M, P, paper_profile(), duration=n - 1, seed=1)
     rep = diagnose(s, M)

@@ -158,7 +158,7 @@ def test_the_command_writes_the_separating_program(tmp_path):
 def _trend_run_diagnosis(tmp_path):
     """A 4-h chamber run (10..45 °C, ramps up to 2 °C/min) with a hidden trend, diagnosed
     with the trend and warm-up candidates: (its path, temperatures, subject, report)."""
-    from gyrostand.core.diagnose.candidates import diagnose
+    from gyrostand.core.diagnose.verdict import diagnose
     from gyrostand.workbench import open_subject
     from gyrostand.workbench.steps import with_design_commands
 

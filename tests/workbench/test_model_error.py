@@ -12,7 +12,7 @@ import pytest
 
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
-from gyrostand.core.diagnose.candidates import diagnose, fit_error
+from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.kalman import kf_run
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import LOG_2PI, Model

@@ -138,7 +138,7 @@ def test_a_gain_from_a_fit_not_at_its_maximum_is_no_discovery(tmp_path):
     and gain a lot; none of their effects is identified, so the current model is refitted
     from their optimum, the note says so, and nothing is left significant."""
     from gyrostand.core.data import Samples
-    from gyrostand.core.diagnose.candidates import diagnose
+    from gyrostand.core.diagnose.verdict import diagnose
     from gyrostand.core.ml.fit import ml
     from gyrostand.core.model import Model
 

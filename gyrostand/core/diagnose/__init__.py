@@ -1,6 +1,7 @@
 """Where a model fails and which effect is missing: residual diagnostics
 (:mod:`.diagnostics`), the prediction error (:mod:`.prederror`), the candidate terms ranked
-by likelihood ratio (:mod:`.candidates`; several runs: :mod:`.joint`) and Allan-variance figures (:mod:`.allan`).
+by likelihood ratio (:mod:`.candidates`), the saturated reference and the verdict
+(:mod:`.reference`, :mod:`.verdict`; several runs: :mod:`.joint`) and Allan-variance figures (:mod:`.allan`).
 """
 
 from __future__ import annotations
@@ -9,7 +10,10 @@ from ..lazy import exports
 
 #: each public name and the submodule defining it
 EXPORTS: dict[str, str] = {
-    "diagnose": "candidates",
+    "diagnose": "verdict",
+    "fit_error": "verdict",
+    "reference_fit": "reference",
+    "Reference": "reference",
     "Report": "results",
     "rank_candidates": "candidates",
     "diagnose_fit": "diagnostics",

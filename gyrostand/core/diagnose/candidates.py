@@ -42,9 +42,7 @@ the data do not determine (at a search bound, or |estimate| < 2 std) is not coun
 ΔAIC/ΔBIC: the fit is then the term's plain shape, whose one coefficient is what it adds
 (as in Laplace's approximation behind BIC, ln n per parameter is the price of a parameter
 the data pin down; one they leave free costs ~nothing). ``Candidate.n_params`` is the
-count used. The verdict is ``adequate`` when the innovations are white (Ljung–Box
-p ≥ 0.01) and no candidate is significant at 5 % after a Bonferroni correction for the
-number of candidates tried.
+count used. The verdict is :mod:`.verdict`'s.
 """
 
 from __future__ import annotations
@@ -54,26 +52,21 @@ import logging
 import os
 import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import ExitStack
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ...errors import DataError, GyrostandError
+from ...errors import GyrostandError
 from ..chisq import chi2_sf, sup_chi2_sf
 from ..data import Samples
 from ..ml.fit import ml
 from ..ml.joint_problem import base_name
-from ..model import Model, context
+from ..model import Model
 from ..results import FitResult
-from ..summary import DRIFT_UNIT
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
-from ..validate import prepare
-from .diagnostics import Diagnosis, diagnose_fit, segments
-from .prederror import ModelError, model_error
-from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate, Report
+from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate
 from .shapes import as_runs, shape_curvatures, shape_params
 
 log = logging.getLogger(__name__)
@@ -301,13 +294,7 @@ def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any
     return out
 
 
-def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT) -> ModelError:
-    """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``."""
-    used = prepare(samples, "model error")
-    return model_error(fit.model, fit.values, used, segments(context(used, None)), unit=unit)
-
-
-def _refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
+def refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
                            cands: list[Candidate], alpha_each: float) -> FitResult | None:
     """The current model refitted from the optimum of each significant candidate whose
     effect is not identified, with that effect at zero: a better fit of the current model
@@ -362,7 +349,7 @@ def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Ca
     return p_d >= alpha_each and p_s < alpha_each
 
 
-def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
+def order_competitors(samples: Samples, model: Model, cands: list[Candidate],
                        alpha_each: float) -> list[Candidate]:
     """Physical explanations before random ones.
 
@@ -399,72 +386,3 @@ def _order_competitors(samples: Samples, model: Model, cands: list[Candidate],
         marked[other.term], note=f"competes with {first.term}: tested again after it")
     rest = [marked.get(c.term, c) for c in cands if c.term not in (first.term, other.term)]
     return [marked[first.term], marked[other.term], *rest]
-
-
-def _checks(fit: FitResult, samples: Samples, unit: str) -> tuple[Diagnosis, ModelError]:
-    """The residual diagnostics and the model error of ``fit``."""
-    return diagnose_fit(fit, samples), fit_error(fit, samples, unit)
-
-
-def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
-             alpha: float = 0.05, terms: list[str] | None = None,
-             unit: str = DRIFT_UNIT) -> Report:
-    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
-
-    A significant candidate whose effect is not identified sends the current model back to
-    a refit from that candidate's optimum; if the current fit rises, every candidate is
-    recomputed (at most twice) and a note says so.
-    """
-    if samples.n_observed < MIN_DIAGNOSE_SAMPLES:
-        raise DataError(
-            f"{samples.source}: {samples.n_observed} observed samples are too few to judge "
-            f"a model (diagnose needs at least {MIN_DIAGNOSE_SAMPLES})")
-    fit = base if base is not None else ml(samples, model)
-    first = fit
-    notes: list[str] = []
-    cands: list[Candidate] = []
-    with ExitStack() as stack:
-        # the residual checks and the model error of the current fit need no candidate:
-        # from the main thread they run beside the refits (filling the cores as they end)
-        early: Future | None = None
-        if threading.current_thread() is threading.main_thread():
-            side = stack.enter_context(
-                ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
-            early = side.submit(_checks, first, samples, unit)
-        for _ in range(3):
-            cands = rank_candidates(samples, model, fit, terms)
-            m = max(len(cands), 1)
-            alpha_each = alpha / m
-            better = _refit_from_candidates(samples, model, fit, cands, alpha_each)
-            if better is None or len(notes) >= 2:
-                break
-            assert better.loglik is not None and fit.loglik is not None
-            notes.append(f"the current fit was not at its maximum; refitted (ln L "
-                         f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate "
-                         "recomputed")
-            fit = better
-        m = max(len(cands), 1)
-        alpha_each = alpha / m
-        cands = _order_competitors(samples, model, cands, alpha_each)
-        if early is not None and fit is first:
-            diag, err = early.result()
-        else:
-            diag, err = _checks(fit, samples, unit)
-    reasons = []
-    if not diag.white:
-        reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
-                       f"over {diag.lags} lags)")
-    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    if sig:
-        reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} "
-                       f"(Bonferroni over {m} candidates: p < {alpha_each:.2g})")
-    if not err.at_floor():
-        h = err.headline()
-        reasons.append(
-            f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
-            f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
-            "the model does not predict the drift from the temperature")
-    return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
-                  adequate=not reasons, alpha=alpha,
-                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
-                  model_error=err, notes=tuple(notes), unit=unit)

@@ -18,7 +18,8 @@ absolute window mean, in the drift's unit, and MATLAB's fit percentage
 on the window means ȳ_w of the measurement and ŷ_w of the prediction.
 
 Beside each RMS, the **floor**: the same statistic for data that follow the fitted model
-exactly (its stochastic part, window-averaged, on the same gaps and bin weights), from
+exactly (its stochastic part — in a diagnosis, that of the saturated reference, which a
+misfit cannot inflate — window-averaged, on the same gaps and bin weights), from
 seeded replicates of that part, and the 99 % point of its sampling distribution. The part
 of the error the model does not explain is ``√max(e² − floor², 0)``; the error is *at its
 floor* when it lies below that 99 % point.
@@ -223,8 +224,14 @@ def model_error(model: Model, p: Mapping[str, float], samples: Samples,
                 segments: Sequence[Mapping[str, Any]] = (), *, unit: str = "y",
                 windows_s: Sequence[float] = WINDOWS_S,
                 horizons_s: Sequence[float] = HORIZONS_S,
-                replicates: int = FLOOR_REPLICATES, seed: int = 0) -> ModelError:
+                replicates: int = FLOOR_REPLICATES, seed: int = 0,
+                noise: tuple[Model, Mapping[str, float]] | None = None) -> ModelError:
     """Open-loop and h-step prediction errors of ``model`` at ``p`` on ``samples``.
+
+    ``noise``: the model and parameters whose random part the floors are drawn from and
+    the h-step predictions of those draws filtered with (default: ``model`` at ``p``);
+    the diagnosis passes its saturated reference (:mod:`.reference`), whose random part
+    a misfit of ``model`` cannot inflate.
 
     ``segments``: dicts with ``kind``, ``start``, ``stop`` (sample indices) and optional
     ``t_start``/``t_stop`` (the profile's heating / cooling / soak segments). Spikes and
@@ -241,7 +248,8 @@ def model_error(model: Model, p: Mapping[str, float], samples: Samples,
     lay = _Layout(N, {w: max(1, int(round(w / dt))) for w in windows}, tuple(ranges_idx))
     det = deterministic_part(model, p, samples)
     preds = _predictions(np.where(ok, y, np.nan), det, model, p, samples, steps)
-    reps = _replicates(model, p, samples, ok, steps, lay, replicates, seed)
+    nm, npar = noise if noise is not None else (model, p)
+    reps = _replicates(nm, npar, samples, ok, steps, lay, replicates, seed)
     entries: dict[tuple[float, float], tuple[dict[str, Any], ...]] = {}
     for h_s, h in zip((0.0, *horizons), steps, strict=True):
         err = np.where(ok, y - preds[h], np.nan)

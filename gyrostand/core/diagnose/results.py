@@ -12,6 +12,7 @@ from ..results import Estimate, FitResult
 from ..summary import DRIFT_UNIT, unit_text
 from .diagnostics import Diagnosis
 from .prederror import ModelError
+from .reference import Reference
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,7 @@ class Report:
     model_error: ModelError | None = None
     notes: tuple[str, ...] = ()
     unit: str = DRIFT_UNIT
+    reference: Reference | None = field(default=None, compare=False)
 
     @property
     def significant(self) -> list[Candidate]:
@@ -109,6 +111,7 @@ class Report:
             "alpha": self.alpha,
             "warnings": list(self.fit.warnings),
             **({"model_error": self.model_error.to_dict()} if self.model_error else {}),
+            **({"reference": self.reference.to_dict()} if self.reference else {}),
             "notes": list(self.notes),
         }
 

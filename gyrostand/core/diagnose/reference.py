@@ -1,0 +1,431 @@
+"""A reference the misfit cannot move: the current model beside a saturated one.
+
+The fitted random part of a model absorbs what its deterministic part misses (a Markov σ
+that grows, a β that shrinks), so every check judged against that random part — the
+model-error floor, whiteness, a candidate's LR — certifies the wrong model. The
+*reference* is the classical lack-of-fit test's "pure error": the current model with a
+deliberately rich deterministic part added (:func:`reference_basis`), fitted by exact ML
+with the same noise model:
+
+* **temperature** — Legendre polynomials P₂…P_K of the scaled temperature, entering the
+  drift's dynamics as the temperature does (``temp``: through the Markov state), K sized
+  by the range the profile covers (one degree per :data:`DEGC_PER_DEGREE`, at most
+  :data:`MAX_T_DEGREE`); P₀ (an offset) when the model has no ``bias``;
+* **temperature rate** — dT/dt and its first-order lag by :data:`RATE_LAG_FRACTION` of the
+  record, each linear and as a switch ``tanh(rate / w)`` (a rate effect, a hysteresis, a
+  lagged temperature: all are functions of these), and dT/dt through the drift's dynamics;
+* **time since switch-on** — t and exp(−t/τ) for τ at :data:`WARMUP_FRACTIONS` of the
+  record (a trend, a warm-up).
+
+Its fit gives what the data allow whatever the vocabulary holds: the random part (the
+floor's, :func:`~.prederror.model_error`'s ``noise``), the lack-of-fit likelihood ratio
+``LR = 2 (ln L_ref − ln L)`` on ``df`` = the rank the basis adds (χ²(df): the basis enters
+linearly and its coefficients are interior), and each group's *partial effect* with bands
+— the static effect of a soak at T, of a steady ramp at rate r, and of the time since
+switch-on — which shows the shape that is missing (:class:`Partial`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..chisq import chi2_sf
+from ..data import Samples
+from ..ml.fit import ml
+from ..model import Model, context
+from ..results import FitResult
+from ..terms.base import HYSTERESIS_RATE, Context, Param, Term
+
+#: °C of temperature range per Legendre degree of the temperature basis (above P₁)
+DEGC_PER_DEGREE = 8.0
+#: highest Legendre degree of the temperature basis
+MAX_T_DEGREE = 5
+#: the lagged rate's time constant, as a fraction of the record (at most MAX_RATE_LAG_S)
+RATE_LAG_FRACTION = 0.05
+MAX_RATE_LAG_S = 900.0
+#: warm-up time constants of the time basis, as fractions of the record
+WARMUP_FRACTIONS = (0.03, 0.15)
+#: a profile whose temperature spans less than this (°C) has no temperature basis
+MIN_T_SPAN = 1.0
+#: a profile whose fastest rate is below this (°C/s: 0.05 °C/min) has no rate basis
+MIN_RATE = 0.05 / 60.0
+#: relative singular-value tolerance of the rank counts behind df
+RANK_TOL = 1e-7
+#: points of each partial-effect curve
+GRID = 41
+#: the groups of the basis, in the order reported
+GROUPS = ("temperature", "rate", "time")
+#: level of the lack-of-fit test
+LACK_OF_FIT_ALPHA = 0.01
+#: step (in ln of the value) of the model's tangent along a held shape parameter
+TANGENT_STEP = 1e-3
+#: a random-part parameter more than this many of its stds from the reference's was
+#: moved by the misfit (:meth:`Reference.traded`)
+TRADE_STD = 3.0
+#: the reference term's name in its model (not a vocabulary term: never a candidate)
+NAME = "reference"
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of the basis: its parameter's short name, group, and how it is built."""
+
+    name: str
+    group: str
+    doc: str
+    through_drift: bool  # enters dε/dt (filtered by the Markov state) rather than the output
+
+
+class ReferenceBasis(Term):
+    """The saturated deterministic part, built for one record by :func:`reference_basis`
+    (a subclass per record: its columns depend on the profile). Not registered: it is
+    never a candidate, a summary bit or a term of a user's model."""
+
+    name = NAME
+    role = "output"
+    math = "+ Σ θ_j B_j(T, dT/dt, t): a saturated deterministic part"
+    no_signature = "the reference's basis: judged as a whole by the lack-of-fit test"
+    columns: tuple[Column, ...] = ()
+    t_mid: float = 0.0
+    t_half: float = 1.0
+    rate_lag: float = 0.0
+    width: float = HYSTERESIS_RATE
+    taus: tuple[float, ...] = ()
+    rate_scale: float = 1.0
+
+    def x(self, T: np.ndarray) -> np.ndarray:
+        return (np.asarray(T, dtype=float) - self.t_mid) / self.t_half
+
+    def raw(self, ctx: Context) -> dict[str, np.ndarray]:
+        """Every column before the drift's dynamics, keyed by short name."""
+        t = ctx.t - ctx.t[0]
+        out: dict[str, np.ndarray] = {}
+        x = self.x(ctx.temp)
+        rates = {"r0": ctx.temp_rate, "rL": ctx.lagged_rate(self.rate_lag)}
+        for c in self.columns:
+            if c.group == "temperature":
+                deg = int(c.name[1:])
+                out[c.name] = np.polynomial.legendre.legval(x, [0] * deg + [1])
+            elif c.name in ("r0", "rL"):
+                out[c.name] = rates[c.name] / self.rate_scale
+            elif c.name in ("s0", "sL"):
+                out[c.name] = np.tanh(rates["r" + c.name[1]] / self.width)
+            elif c.name == "rin":
+                out[c.name] = rates["r0"] / self.rate_scale
+            elif c.name == "trend":
+                out[c.name] = t / max(t[-1], 1.0)
+            else:  # e<k>: a warm-up
+                out[c.name] = np.exp(-t / self.taus[int(c.name[1:])])
+        return out
+
+    def regressors(self, p, ctx: Context) -> dict[str, np.ndarray]:
+        raw = self.raw(ctx)
+        beta = p.get("markov.beta")
+        out = {}
+        for c in self.columns:
+            u = raw[c.name]
+            out[self.key(c.name)] = (ctx.through_markov(u, beta) if c.through_drift
+                                     and beta is not None else u)
+        return out
+
+
+def reference_basis(samples: Samples, model: Model) -> type[ReferenceBasis]:
+    """The basis for this record and model, sized by the record's length and the
+    profile's coverage: a :class:`ReferenceBasis` subclass."""
+    ctx = context(samples, None)
+    T = np.asarray(samples.temp, dtype=float)
+    ok = np.isfinite(T)
+    lo, hi = (float(np.min(T[ok])), float(np.max(T[ok]))) if ok.any() else (0.0, 0.0)
+    duration = float(samples.t[-1] - samples.t[0]) if len(samples) else 0.0
+    drift = "markov" in model.names
+    cols: list[Column] = []
+    if not {"bias"} & set(model.names):
+        cols.append(Column("P0", "temperature", "an offset", False))
+    span = hi - lo
+    if span >= MIN_T_SPAN:
+        top = min(MAX_T_DEGREE, 1 + max(1, int(span // DEGC_PER_DEGREE)))
+        cols += [Column(f"P{d}", "temperature", f"Legendre P{d} of the scaled T", drift)
+                 for d in range(2, top + 1)]
+    rate = np.abs(ctx.temp_rate) if len(samples) > 1 else np.zeros(1)
+    fastest = float(np.max(rate)) if rate.size else 0.0
+    lag = min(MAX_RATE_LAG_S, RATE_LAG_FRACTION * duration)
+    if fastest >= MIN_RATE:
+        cols += [Column("r0", "rate", "dT/dt", False),
+                 Column("s0", "rate", "tanh(dT/dt / w)", False)]
+        if lag >= 10 * samples.dt:
+            cols += [Column("rL", "rate", f"dT/dt lagged by {lag:.0f} s", False),
+                     Column("sL", "rate", f"tanh of dT/dt lagged by {lag:.0f} s", False)]
+        if drift:
+            cols.append(Column("rin", "rate", "dT/dt into dε/dt", True))
+    taus = tuple(f * duration for f in WARMUP_FRACTIONS if f * duration >= 10 * samples.dt)
+    if duration > 0:
+        cols.append(Column("trend", "time", "t / record", False))
+        cols += [Column(f"e{i}", "time", f"exp(−t / {tau:.0f} s)", False)
+                 for i, tau in enumerate(taus)]
+    attrs = {
+        "params": tuple(Param(c.name, "linear", "y", c.doc) for c in cols),
+        "columns": tuple(cols),
+        "t_mid": 0.5 * (lo + hi), "t_half": max(0.5 * span, 1e-9),
+        "rate_lag": lag if lag >= 10 * samples.dt else 0.0,
+        "width": max(HYSTERESIS_RATE, 0.05 * fastest),
+        "taus": taus, "rate_scale": max(fastest, 1e-12),
+    }
+    return type("ReferenceBasis_", (ReferenceBasis,), attrs)
+
+
+@dataclass(frozen=True)
+class Partial:
+    """One group's partial effect in the reference: the drift's change (drift unit) as a
+    function of ``variable`` (``x``), with its standard deviation, and the Wald test that
+    the group adds nothing (``wald`` on ``df``, ``p_value``)."""
+
+    group: str
+    variable: str
+    unit: str
+    x: np.ndarray
+    effect: np.ndarray
+    std: np.ndarray
+    wald: float
+    df: int
+    p_value: float
+
+    @property
+    def significant(self) -> bool:
+        return self.p_value < 0.01
+
+    def peak(self) -> tuple[float, float, float]:
+        """(x, effect, std) where the effect is largest among the points where it is
+        clear of its band (|effect| > 2 std; all points when none is)."""
+        a = np.abs(self.effect)
+        clear = a > 2.0 * self.std
+        i = int(np.argmax(np.where(clear, a, -1.0))) if clear.any() else int(np.argmax(a))
+        return float(self.x[i]), float(self.effect[i]), float(self.std[i])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"group": self.group, "variable": self.variable, "unit": self.unit,
+                "x": [float(v) for v in self.x], "effect": [float(v) for v in self.effect],
+                "std": [float(v) for v in self.std], "wald": self.wald, "df": self.df,
+                "p_value": self.p_value}
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The saturated reference beside a fit (:func:`reference_fit`).
+
+    ``lr``/``df``/``p_value``: the lack-of-fit test; ``partial``: each group's partial
+    effect; ``fit``: the reference's exact ML fit with its own random part, made when the
+    lack of fit is significant (``None`` otherwise: the current fit's random part is then
+    the floor's); ``noise``: the random part the floors are drawn from."""
+
+    model: Model
+    basis: type[ReferenceBasis]
+    lr: float
+    df: int
+    p_value: float
+    alpha: float
+    partial: tuple[Partial, ...]
+    noise_model: Model
+    noise: dict[str, float]
+    fit: FitResult | None = None
+    traded: tuple[str, ...] = ()
+    seconds: float = 0.0
+
+    @property
+    def significant(self) -> bool:
+        """Whether the lack of fit is significant at the reference's level ``alpha``."""
+        return self.df > 0 and self.p_value < self.alpha
+
+    def missing(self) -> list[Partial]:
+        """The groups whose partial effect is significant, largest first."""
+        sig = [q for q in self.partial if q.significant]
+        return sorted(sig, key=lambda q: -q.wald / max(q.df, 1))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"lr": self.lr, "df": self.df, "p_value": self.p_value, "alpha": self.alpha,
+                "significant": self.significant,
+                "loglik": self.fit.loglik if self.fit is not None else None,
+                "noise": dict(self.noise), "traded": list(self.traded),
+                "columns": [c.name for c in self.basis.columns],
+                "partial": [q.to_dict() for q in self.partial], "seconds": self.seconds}
+
+
+def _rank(W: np.ndarray) -> int:
+    if W.shape[1] == 0:
+        return 0
+    n = np.linalg.norm(W, axis=0)
+    W = W[:, n > 0] / n[n > 0]
+    if W.shape[1] == 0:
+        return 0
+    s = np.linalg.svd(W, compute_uv=False)
+    return int(np.sum(s > RANK_TOL * s[0]))
+
+
+def _whitened(model: Model, p, samples: Samples, shapes: list[str]
+              ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The regressors and the drift through the model's Kalman filter at ``p``, scaled by
+    1/√f (observed rows), and the regressors' names: the GLS design. With a column per
+    held shape parameter (``tangent:<name>``): the derivative of the model's
+    deterministic part along it."""
+    ctx = context(samples, model)
+    X = model.regressors(p, ctx)
+    names = list(model.names_of_kind("linear"))
+    theta = np.array([p[n] for n in names])
+    tangents = []
+    for n in shapes:
+        # the model's own freedom near its fit: d(Xθ)/d ln η of each held shape η
+        hi, lo = dict(p), dict(p)
+        hi[n], lo[n] = p[n] * np.exp(TANGENT_STEP), p[n] * np.exp(-TANGENT_STEP)
+        d = (model.regressors(hi, ctx) - model.regressors(lo, ctx)) @ theta
+        tangents.append(d / (2 * TANGENT_STEP))
+    if tangents:
+        X = np.column_stack([X, *tangents])
+        names += [f"tangent:{n}" for n in shapes]
+    E, f = model.filter_columns(p, samples, X)
+    ok = np.isfinite(E[:, 0]) & (f > 0)
+    w = 1.0 / np.sqrt(f[ok])
+    return E[ok, 1:] * w[:, None], E[ok, 0] * w, names
+
+
+def _partials(basis: type[ReferenceBasis], p, cov: np.ndarray, names: list[str],
+              samples: Samples) -> tuple[Partial, ...]:
+    """Each group's partial effect on a grid of its variable, with bands."""
+    b = basis()
+    beta = p.get("markov.beta")
+    T = np.asarray(samples.temp, dtype=float)
+    T = T[np.isfinite(T)]
+    ctx = context(samples, None)
+    rate = ctx.temp_rate
+    t = samples.t - samples.t[0]
+    out = []
+    for group in GROUPS:
+        cols = [c for c in basis.columns if c.group == group]
+        if not cols:
+            continue
+        if group == "temperature":
+            x = np.linspace(float(T.min()), float(T.max()), GRID)
+            rows = []
+            for c in cols:
+                v = np.polynomial.legendre.legval(b.x(x), [0] * int(c.name[1:]) + [1])
+                # a soak at T: the drift settles at θ·u(T)/β (an input of dε/dt)
+                rows.append(v / beta if c.through_drift and beta else v)
+            variable, unit = "T", "degC"
+        elif group == "rate":
+            x = np.linspace(float(np.nanmin(rate)), float(np.nanmax(rate)), GRID)
+            rows = []
+            for c in cols:
+                # a steady ramp at rate r: every lag of the rate is r
+                if c.name in ("r0", "rL"):
+                    v = x / b.rate_scale
+                elif c.name in ("s0", "sL"):
+                    v = np.tanh(x / b.width)
+                else:  # rin: dT/dt into dε/dt, settled
+                    v = x / b.rate_scale / beta if beta else x / b.rate_scale
+                rows.append(v)
+            variable, unit = "dT/dt", "degC/s"
+        else:
+            x = np.linspace(0.0, float(t[-1]), GRID)
+            rows = [x / max(float(t[-1]), 1.0) if c.name == "trend"
+                    else np.exp(-x / b.taus[int(c.name[1:])]) for c in cols]
+            variable, unit = "t", "s"
+        idx = [names.index(b.key(c.name)) for c in cols]
+        theta = np.array([p[b.key(c.name)] for c in cols])
+        C = cov[np.ix_(idx, idx)]
+        G = np.array(rows).T  # (grid, cols)
+        eff = G @ theta
+        std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, C, G), 0.0))
+        # Wald: θ' C⁺ θ on the rank of C (collinear columns count once)
+        w, V = np.linalg.eigh(C)
+        keep = w > RANK_TOL * max(float(w.max()), 1e-300)
+        z = V[:, keep].T @ theta
+        wald = float(np.sum(z * z / w[keep]))
+        df = int(keep.sum())
+        out.append(Partial(group, variable, unit, x, eff, std, wald, df,
+                           chi2_sf(wald, df) if df else 1.0))
+    return tuple(out)
+
+
+def _noise_names(model: Model) -> list[str]:
+    return [n for n in model.param_names if model.term_of(n).role in ("process", "noise")]
+
+
+def reference_fit(samples: Samples, model: Model, current: FitResult,
+                  alpha: float = LACK_OF_FIT_ALPHA) -> Reference:
+    """The saturated reference of ``model`` on ``samples`` beside the ``current`` fit.
+
+    The lack-of-fit test is the GLS one at the current fit's random part: the basis's
+    columns and the model's through the current fit's Kalman filter, LR the fall of the
+    whitened residual sum of squares, df the rank the basis adds — χ²(df) given the noise
+    (a reference whose random part is refitted trades its low frequencies against the
+    basis: on clean 4-h runs β 20 % up, σ 9 % down, and its LR averaged 14.5 on 12 df,
+    p < 0.01 in 7 of 30 runs; at the current fit's random part 12.3). When it is
+    significant the reference is fitted by exact ML (random part free, the model's
+    shapes held, started at the current fit and the GLS basis), and its random part is
+    the floor's: the current fit's was inflated by the misfit (``traded`` names the
+    parameters moved beyond ±:data:`TRADE_STD` of their std)."""
+    t0 = time.perf_counter()
+    basis = reference_basis(samples, model)
+    term = basis()
+    ref_model = Model(model.terms + (term,))
+    p = dict(current.values)
+    p.update({term.key(c.name): 0.0 for c in basis.columns})
+    noise_names = _noise_names(model)
+    # the shapes of the model's deterministic terms (a lag, a width, a warm-up's τ) are
+    # held at the current fit, with the model's tangent along each beside its columns:
+    # the test is of what the model cannot do near its fit (a shape at a search bound or
+    # a little off its optimum would otherwise count as lack of fit: hidden hysteresis,
+    # its τ at the bound, LR averaged 15.2 on 12 df without the tangents)
+    shapes = [n for n, q in model.params if q.kind != "linear" and n not in noise_names]
+    W, wy, names = _whitened(ref_model, p, samples, shapes)
+    own = [i for i, n in enumerate(names) if not n.startswith(NAME + ".")]
+    rss_cur = float(np.sum((wy - W[:, own] @ np.linalg.lstsq(W[:, own], wy,
+                                                              rcond=1e-12)[0]) ** 2))
+    theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
+    rss_ref = float(np.sum((wy - W @ theta) ** 2))
+    lr = max(rss_cur - rss_ref, 0.0)
+    df = _rank(W) - _rank(W[:, own])
+    pv = chi2_sf(lr, df) if df > 0 else 1.0
+    cov = np.linalg.pinv(W.T @ W, rcond=1e-12, hermitian=True)
+    p.update({n: float(v) for n, v in zip(names, theta, strict=True)
+              if n.startswith(NAME + ".")})
+    partial = _partials(basis, p, cov, names, samples)
+    fit = None
+    traded: tuple[str, ...] = ()
+    noise_model, noise = model, {n: float(current.values[n]) for n in noise_names}
+    if df > 0 and pv < alpha:
+        # the shapes held: with the basis beside them they would be nearly free
+        # (measured: after a hidden hysteresis was added, LR 29.4 on 12 df with them free)
+        fit = ml(samples, ref_model, start={k: v for k, v in p.items()
+                                            if not k.startswith("tangent:")},
+                 fixed={n: float(current.values[n]) for n in shapes}, n_local=1,
+                 std_errors=False)
+        noise_model, noise = ref_model, dict(fit.values)
+        traded = tuple(n for n in noise_names
+                       if current.parameters[n].std > 0
+                       and abs(current.values[n] - fit.values[n])
+                       > TRADE_STD * current.parameters[n].std)
+    return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
+                     partial=partial, noise_model=noise_model, noise=noise, fit=fit,
+                     traded=traded, seconds=time.perf_counter() - t0)
+
+
+def lack_of_fit_text(ref: Reference) -> str:
+    """One line: the lack-of-fit test."""
+    p = ref.p_value
+    ps = f"{p:.2g}" if p >= 1e-300 else "< 1e-300"
+    return f"lack of fit against the saturated reference: LR {ref.lr:.1f} on {ref.df} df, p {ps}"
+
+
+def describe_missing(ref: Reference, unit: str) -> list[str]:
+    """Plain lines on what shape is missing: each significant group's peak effect."""
+    out = []
+    for q in ref.missing():
+        x, e, s = q.peak()
+        xs = f"{x:.3g} {q.unit}" if not math.isnan(x) else "?"
+        out.append(f"{q.group}: {e:+.3g} ± {s:.2g} {unit} at {q.variable} = {xs} "
+                   f"(Wald {q.wald:.1f} on {q.df} df)")
+    return out

@@ -1,0 +1,142 @@
+"""The diagnosis of a model and its verdict, judged against a reference a misfit cannot move.
+
+:func:`diagnose` fits the model (unless given the fit), ranks the candidate terms
+(:mod:`.candidates`), fits the saturated reference (:mod:`.reference`) and measures the
+model error with the floor drawn from the *reference's* random part. The verdict is
+``adequate`` when
+
+* the innovations are white (Ljung–Box p ≥ 0.01),
+* no candidate is significant at 5 % after a Bonferroni correction for the number tried,
+* the open-loop model error lies at the reference's floor (below its 99 % point), and
+* the lack of fit against the reference is not significant (p ≥
+  :data:`~.reference.LACK_OF_FIT_ALPHA`).
+
+When the lack of fit stays significant and no vocabulary term is, the effect is outside
+the vocabulary: the reasons say which shape the reference finds (its partial effects of
+T, of dT/dt and of time) and that a plugin term of that shape is the next step.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
+
+from ...errors import DataError
+from ..data import Samples
+from ..ml.fit import ml
+from ..model import Model, context
+from ..results import FitResult
+from ..summary import DRIFT_UNIT
+from ..validate import prepare
+from .candidates import (
+    MIN_DIAGNOSE_SAMPLES,
+    look_alikes,
+    order_competitors,
+    rank_candidates,
+    refit_from_candidates,
+)
+from .diagnostics import Diagnosis, diagnose_fit, segments
+from .prederror import ModelError, model_error
+from .reference import Reference, describe_missing, lack_of_fit_text, reference_fit
+from .results import Candidate, Report
+
+
+def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT,
+              reference: Reference | None = None) -> ModelError:
+    """The model error (open-loop and h-step, window means) of ``fit`` on ``samples``; its
+    floor from ``reference``'s random part (:func:`reference_fit`: its own where the lack
+    of fit is significant, else the fit's)."""
+    used = prepare(samples, "model error")
+    noise = (reference.noise_model, reference.noise) if reference is not None else None
+    return model_error(fit.model, fit.values, used, segments(context(used, None)), unit=unit,
+                       noise=noise)
+
+
+def checks(fit: FitResult, samples: Samples, unit: str
+           ) -> tuple[Diagnosis, Reference | None, ModelError]:
+    """The residual diagnostics of ``fit``, its saturated reference (one run only) and its
+    model error with the reference's floor."""
+    ref = reference_fit(samples, fit.model, fit) if not isinstance(samples, tuple) else None
+    return diagnose_fit(fit, samples), ref, fit_error(fit, samples, unit, ref)
+
+
+def verdict_reasons(diag: Diagnosis, err: ModelError, ref: Reference | None,
+                    sig: list[Candidate], alpha: float, m: int, unit: str) -> list[str]:
+    """Why the model is not adequate (empty: it is)."""
+    reasons = []
+    if not diag.white:
+        reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
+                       f"over {diag.lags} lags)")
+    if sig:
+        reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} "
+                       f"(Bonferroni over {m} candidates: p < {alpha / m:.2g})")
+    if not err.at_floor():
+        h = err.headline()
+        reasons.append(
+            f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
+            f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
+            "the model does not predict the drift from the temperature")
+    if ref is not None and ref.significant:
+        shape = describe_missing(ref, unit)
+        where = f" (the reference finds {'; '.join(shape)})" if shape else ""
+        if sig:
+            reasons.append(f"{lack_of_fit_text(ref)}{where}")
+        else:
+            reasons.append(
+                f"{lack_of_fit_text(ref)}{where}: no term of the vocabulary explains it — "
+                "an effect outside the vocabulary; a plugin term of that shape is the next "
+                "step (README: plugins)")
+    return reasons
+
+
+def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
+             alpha: float = 0.05, terms: list[str] | None = None,
+             unit: str = DRIFT_UNIT) -> Report:
+    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
+
+    A significant candidate whose effect is not identified sends the current model back to
+    a refit from that candidate's optimum; if the current fit rises, every candidate is
+    recomputed (at most twice) and a note says so.
+    """
+    if samples.n_observed < MIN_DIAGNOSE_SAMPLES:
+        raise DataError(
+            f"{samples.source}: {samples.n_observed} observed samples are too few to judge "
+            f"a model (diagnose needs at least {MIN_DIAGNOSE_SAMPLES})")
+    fit = base if base is not None else ml(samples, model)
+    first = fit
+    notes: list[str] = []
+    cands: list[Candidate] = []
+    with ExitStack() as stack:
+        # the residual checks, the reference and the model error of the current fit need
+        # no candidate: from the main thread they run beside the refits
+        early: Future | None = None
+        if threading.current_thread() is threading.main_thread():
+            side = stack.enter_context(
+                ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
+            early = side.submit(checks, first, samples, unit)
+        for _ in range(3):
+            cands = rank_candidates(samples, model, fit, terms)
+            m = max(len(cands), 1)
+            alpha_each = alpha / m
+            better = refit_from_candidates(samples, model, fit, cands, alpha_each)
+            if better is None or len(notes) >= 2:
+                break
+            assert better.loglik is not None and fit.loglik is not None
+            notes.append(f"the current fit was not at its maximum; refitted (ln L "
+                         f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate "
+                         "recomputed")
+            fit = better
+        m = max(len(cands), 1)
+        alpha_each = alpha / m
+        cands = order_competitors(samples, model, cands, alpha_each)
+        if early is not None and fit is first:
+            diag, ref, err = early.result()
+        else:
+            diag, ref, err = checks(fit, samples, unit)
+    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit)
+    return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
+                  adequate=not reasons, alpha=alpha,
+                  look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
+                  model_error=err, notes=tuple(notes), unit=unit, reference=ref)

@@ -1,0 +1,32 @@
+"""The saturated reference in text: the lack-of-fit test and, where it is significant, the
+shape that is missing (:mod:`gyrostand.core.diagnose.reference`)."""
+
+from __future__ import annotations
+
+from ..core.diagnose.reference import Reference, lack_of_fit_text
+
+__all__ = ["reference"]
+
+
+def reference(ref: Reference, unit: str) -> list[str]:
+    """The lack-of-fit test against the saturated reference, and where it is significant
+    the shape that is missing: each group's partial effect, with its band."""
+    lines = [f"reference: {lack_of_fit_text(ref)} — "
+             + ("SIGNIFICANT" if ref.significant else "not significant")
+             + f" (level {ref.alpha:g})"]
+    if ref.traded:
+        lines.append(f"  the misfit moved the random part: {', '.join(ref.traded)} beyond "
+                     "±3 std of the reference's (the floor is the reference's)")
+    if not ref.significant:
+        return lines
+    for q in ref.partial:
+        flag = "missing" if q.significant else "no clear effect"
+        lines.append(f"  partial effect of {q.variable} ({q.group}; Wald {q.wald:.1f} on "
+                     f"{q.df} df, p {q.p_value:.2g}): {flag}")
+        if not q.significant:
+            continue
+        step = max(1, (len(q.x) - 1) // 8)
+        for i in range(0, len(q.x), step):
+            lines.append(f"    {q.variable} = {q.x[i]:10.4g} {q.unit:<6} "
+                         f"{q.effect[i]:+10.4g} ± {2 * q.std[i]:.3g} {unit}")
+    return lines
