@@ -3,7 +3,7 @@ shape that is missing (:mod:`gyrostand.core.diagnose.reference`)."""
 
 from __future__ import annotations
 
-from ..core.diagnose.reference import Reference, lack_of_fit_text
+from ..core.diagnose.reference import REPORT_ALPHA, Reference, lack_of_fit_text
 
 __all__ = ["reference"]
 
@@ -13,11 +13,11 @@ def reference(ref: Reference, unit: str) -> list[str]:
     the shape that is missing: each group's partial effect, with its band."""
     lines = [f"reference: {lack_of_fit_text(ref)} — "
              + ("SIGNIFICANT" if ref.significant else "not significant")
-             + f" (level {ref.alpha:g})"]
+             + f" (verdict's level {ref.alpha:g})"]
     if ref.traded:
         lines.append(f"  the misfit moved the random part: {', '.join(ref.traded)} beyond "
                      "±3 std of the reference's (the floor is the reference's)")
-    if not ref.significant:
+    if ref.p_value >= REPORT_ALPHA:
         return lines
     for q in ref.partial:
         flag = "missing" if q.significant else "no clear effect"

@@ -248,3 +248,41 @@ def test_a_plugin_term_named_like_a_built_in_is_refused(tmp_path):
     err = r.stderr
     assert "plugins[0]" in err and "my_bias.MyBias" in err  # the plugin ...
     assert "built-in term 'bias'" in err and "gyrostand.core.terms.builtin.Bias" in err  # ... and it
+
+
+def test_an_effect_outside_the_vocabulary_is_shown_then_a_plugin_term_makes_it_adequate(
+        installed, blf, tmp_path):
+    """Without the plugin, the vocabulary has no term for the step above 40 °C: following
+    the workbench's advice ends NOT ADEQUATE against the saturated reference, which shows
+    a temperature effect that is missing and says a plugin term is the next step; with the
+    plugin installed, ``fit --add temp_step`` makes the model adequate (issue 23)."""
+    cfg = session_file(tmp_path, "outside", ["markov", "temp", "bias"], ["ml"])
+    d = yaml.safe_load(cfg.read_text())
+    del d["simulate"]  # its truth names the plugin's term: the replay needs no simulator
+    cfg.write_text(yaml.safe_dump(d))
+    gyrostand("replay", str(cfg), str(blf), "--out", str(tmp_path / "out"), path=None)
+    run = run_folder(tmp_path / "out")
+    added = []
+    for _ in range(3):  # follow the advice while a vocabulary term is significant
+        rep = json.loads(gyrostand("diagnose", str(run), "--json", path=None).stdout)
+        sig = [c for c in rep["candidates"] if c["ranked"]
+               and c["p_value"] < rep["alpha"] / len(rep["candidates"])]
+        if not sig:
+            break
+        gyrostand("fit", str(run), "--add", sig[0]["term"], path=None)
+        added.append(sig[0]["term"])
+    ref = rep["reference"]
+    # reported at 1 % (the verdict's level is 0.1 % until its calibration is done)
+    assert ref["p_value"] < 0.01, (added, ref["lr"], ref["df"])
+    # the shape shown is one of the temperature, the only group clear of its band
+    groups = {q["group"]: q for q in ref["partial"]}
+    assert groups["temperature"]["p_value"] < 0.01, groups["temperature"]
+    assert groups["rate"]["p_value"] > 0.01 and groups["time"]["p_value"] > 0.01
+    text = gyrostand("diagnose", str(run), path=None).stdout
+    assert "reference: lack of fit" in text and "partial effect of T" in text
+
+    gyrostand("fit", str(run), "--add", "temp_step", path=installed)
+    again = json.loads(gyrostand("diagnose", str(run), "--json", path=installed).stdout)
+    assert "temp_step" in again["model"]
+    assert again["adequate"], again["reasons"]
+    assert again["reference"]["p_value"] > 0.01, again["reference"]
