@@ -1,5 +1,5 @@
 """``gyrostand run CONFIG [-i IF] [-c CH] [-b BIT/S] [--fd] [--data-bitrate BIT/S]
-[--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the live daemon."""
+[--bus-kwargs KEY=VALUE...] [--app-name NAME] [--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the live daemon."""
 
 from __future__ import annotations
 
@@ -47,7 +47,9 @@ def add_parser(sub: Any) -> None:
                         "in raw-2.blf, raw-3.blf, ...")
     p.add_argument("--check", action="store_true",
                    help="validate the session file (keys, DBC, signal mapping, response "
-                        "frames) and print what it maps, without opening the bus")
+                        "frames) and print what it maps, with the source of each bus key "
+                        "(session file, command line, env, python-can config), without "
+                        "opening the bus")
     add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
@@ -76,9 +78,12 @@ def run(args: argparse.Namespace) -> int:
 
 def describe_session(cfg: SessionConfig) -> str:
     """What a valid session maps, for ``run --check``."""
-    bus = ", ".join(f"{k}={v!r}" for k, v in cfg.bus.items())
+    from ..can.busconfig import SESSION_FILE, ResolvedBus
+
+    bus = ResolvedBus(cfg.bus, {k: cfg.bus_sources.get(k, SESSION_FILE) for k in cfg.bus})
     lines = [f"{cfg.path}: valid session {cfg.name!r}",
-             f"  bus (not opened): {bus}",
+             "  bus (not opened; after each key, where it came from):",
+             *(f"    {line}" for line in bus.describe()),
              f"  dbc: {cfg.dbc_path} ({len(cfg.db.messages)} messages)",
              f"  sampling: dt {cfg.sampling.dt:g} s; runs under {cfg.output}"]
     for g in cfg.gyros:
