@@ -195,3 +195,27 @@ def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[st
         return x
     parse.__name__ = "number"
     return parse
+
+
+def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str | None:
+    """Why a run (``what``: ``replay``, ``run``) that decoded no frame measured nothing,
+    in one line (the frames received, why each was not decoded, the mapped messages, the
+    ids seen most often, the run folder, which is kept); None when it decoded a frame."""
+    dec = outcome.stats.get("decoder", {})
+    if dec.get("decoded", 0):
+        return None
+    kept = f"the run folder is kept: {outcome.run_dir}"
+    n = dec.get("received", 0)
+    if not n:
+        where = "in the log" if what == "replay" else "received on the bus"
+        return f"{what}: no CAN frame {where}, nothing measured; {kept}"
+    why = [f"{k} {v:,}" for k, v in dec.get("rejected", {}).items() if v]
+    if dec.get("ignored"):
+        why.insert(0, f"ignored {dec['ignored']:,} (DBC messages no channel maps)")
+    refs = {c.signal.message.key: c.signal.message
+            for g in cfg.gyros for c in (g.drift, g.temperature)}
+    mapped = ", ".join(f"{m.name} 0x{m.frame_id:X}" for m in refs.values())
+    seen = ", ".join(f"{i} ({c:,} frames)"
+                     for i, c in list(dec.get("unknown_ids", {}).items())[:5])
+    return (f"{what} decoded none of {n:,} frames ({', '.join(why)}); the mapped messages "
+            f"are {mapped}" + (f"; ids seen most: {seen}" if seen else "") + f"; {kept}")

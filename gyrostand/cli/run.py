@@ -11,6 +11,7 @@ from .common import (
     add_bus_args,
     add_data_format_args,
     add_format_args,
+    decoded_nothing,
     number,
     print_outcome,
     progress,
@@ -73,6 +74,10 @@ def run(args: argparse.Namespace) -> int:
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
                        on_ready=ready, resume=args.resume, on_waiting=waiting)
     print_outcome(outcome, sys.stdout, format=args.format)
+    empty = decoded_nothing(outcome, cfg, "run")
+    if empty is not None:  # frames none of which fit the session: bad input; none: a fault
+        print(f"error: {empty}", file=sys.stderr)
+        return 2 if outcome.stats["decoder"].get("received") else 1
     return 0 if outcome.ok else 1
 
 
