@@ -22,6 +22,7 @@ clear error naming the sources when no ``interface`` is found in any of them.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -31,7 +32,7 @@ import can
 import can.util
 
 __all__ = ["COMMAND_LINE", "SESSION_FILE", "ResolvedBus", "resolve_bus",
-           "python_can_sources", "parse_bus_kwarg"]
+           "python_can_sources", "parse_bus_kwarg", "socketcan_available"]
 
 COMMAND_LINE = "command line"
 SESSION_FILE = "session file"
@@ -120,3 +121,18 @@ def parse_bus_kwarg(text: str) -> tuple[str, Any]:
         raise ValueError(f"expected KEY=VALUE (a python-can bus argument), got {text!r}")
     return key, can.util.cast_from_string(value)
 
+
+
+def socketcan_available(channel: str = "can0") -> bool:
+    """Whether python-can's ``socketcan`` interface can open ``channel`` here: the system
+    has ``socket.AF_CAN``, a raw CAN socket opens (the kernel has SocketCAN), and a
+    network interface named ``channel`` exists."""
+    if not all(hasattr(socket, n) for n in ("AF_CAN", "CAN_RAW", "if_nametoindex")):
+        return False
+    try:
+        with socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW):
+            pass
+        socket.if_nametoindex(channel)
+    except OSError:
+        return False
+    return True

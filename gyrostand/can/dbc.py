@@ -26,6 +26,7 @@ __all__ = [
     "SignalRef",
     "MessageRef",
     "load_dbc",
+    "text_encoding",
     "find_message",
     "find_signal",
     "frame_key",
@@ -105,12 +106,28 @@ def load_dbc(path: str | Path) -> Database:
     if not path.is_file():
         raise CanEdgeError(f"{path}: DBC file not found")
     try:
-        db = cantools.database.load_file(str(path), strict=True)
+        db = cantools.database.load_file(str(path), strict=True, encoding=text_encoding(path))
     except Exception as exc:  # cantools raises a zoo of parser errors
         raise CanEdgeError(f"{path}: cannot load DBC: {exc}") from exc
     if not isinstance(db, Database):
         raise CanEdgeError(f"{path}: not a CAN database")
     return db
+
+
+def text_encoding(path: str | Path) -> str:
+    """The encoding a database file's text is read in: UTF-8 when its bytes are UTF-8
+    (``"°/h"`` is then ``°/h``, not cantools' cp1252 default's ``Â°/h``), else cp1252 (a
+    DBC editor's Windows default, byte 0xB0 for ``°``). Raises :class:`CanEdgeError` when
+    the file cannot be read."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise CanEdgeError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return "cp1252"
+    return "utf-8-sig" if raw.startswith(b"\xef\xbb\xbf") else "utf-8"
 
 
 def _message_ref(msg: Message) -> MessageRef:

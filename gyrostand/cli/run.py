@@ -99,6 +99,7 @@ def describe_session(cfg: SessionConfig) -> str:
             mux = f" when {s.multiplexer} = {'/'.join(map(str, s.multiplexer_ids))}" \
                 if s.multiplexer else ""
             cnt = f", counter {ch.counter.name}" if ch.counter else ""
+            cnt += ", matched by J1939 PGN" if ch.match == "pgn" else ""
             lines.append(f"    {role:<12} {s.message.describe()}.{s.name} "
                          f"[{s.unit or 'no unit'}]{mux}{cnt}")
         if g.result is not None:
