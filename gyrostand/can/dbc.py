@@ -11,12 +11,14 @@ up and what exists; the session loader prefixes them with the key path.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import cantools
+import cantools.j1939
 from cantools.database.can import Database, Message
 
 from gyrostand.can.logs.frames import EXTENDED_KEY_BIT
@@ -42,12 +44,14 @@ def frame_key(arbitration_id: int, is_extended: bool) -> int:
     return arbitration_id | EXTENDED_KEY_BIT if is_extended else arbitration_id
 
 
+@functools.lru_cache(maxsize=8192)
 def j1939_pgn(frame_id: int) -> int:
     """The J1939 parameter group number of a 29-bit id: the id without its priority and
     source address, and without the destination address (PS) when the PDU format is
-    below 240 (PDU1); cantools' ``j1939.pgn_from_frame_id``, inlined for the receive path."""
-    pgn = (frame_id >> 8) & 0x3FFFF
-    return pgn & 0x3FF00 if (pgn >> 8) & 0xFF < 240 else pgn
+    below 240 (PDU1). cantools' own ``j1939.pgn_from_frame_id``, memoised: it costs ~26 µs
+    a call (bitstruct), and the receive path asks once per unrouted extended frame, of
+    the few hundred ids a bus repeats (a cached call: ~0.1 µs)."""
+    return int(cantools.j1939.pgn_from_frame_id(frame_id))
 
 
 @dataclass(frozen=True)
