@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -31,3 +33,35 @@ def c1_samples(base_model):
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+#: python-can's config files as it ships them (read before any test patches them)
+_PYTHON_CAN_FILES: list[str] = []
+
+
+@pytest.fixture(autouse=True)
+def _no_python_can_config(monkeypatch):
+    """python-can's own config (``~/.canrc``, ``/etc/can.conf``, ``CAN_*`` variables) fills
+    every bus key a session leaves out: no test sees the machine's. A test that wants one
+    takes :func:`python_can_home`."""
+    import can.util
+
+    if not _PYTHON_CAN_FILES:
+        _PYTHON_CAN_FILES.extend(can.util.CONFIG_FILES)
+    monkeypatch.setattr(can.util, "CONFIG_FILES", [])
+    for var in [v for v in os.environ if v.startswith("CAN_")]:
+        monkeypatch.delenv(var)
+
+
+@pytest.fixture
+def python_can_home(tmp_path, monkeypatch, _no_python_can_config):
+    """A temporary, empty HOME, whose files python-can reads as its config (its config
+    files under ``~``: ``~/can.conf``, ``~/.can``, ``~/.canrc``); no ``CAN_*`` variables."""
+    import can.util
+
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.setattr(can.util, "CONFIG_FILES",
+                        [p for p in _PYTHON_CAN_FILES if p.startswith("~")])
+    return home

@@ -11,12 +11,14 @@ up and what exists; the session loader prefixes them with the key path.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import cantools
+import cantools.j1939
 from cantools.database.can import Database, Message
 
 from gyrostand.can.logs.frames import EXTENDED_KEY_BIT
@@ -26,6 +28,7 @@ __all__ = [
     "SignalRef",
     "MessageRef",
     "load_dbc",
+    "text_encoding",
     "find_message",
     "find_signal",
     "frame_key",
@@ -41,12 +44,14 @@ def frame_key(arbitration_id: int, is_extended: bool) -> int:
     return arbitration_id | EXTENDED_KEY_BIT if is_extended else arbitration_id
 
 
+@functools.lru_cache(maxsize=8192)
 def j1939_pgn(frame_id: int) -> int:
     """The J1939 parameter group number of a 29-bit id: the id without its priority and
     source address, and without the destination address (PS) when the PDU format is
-    below 240 (PDU1); cantools' ``j1939.pgn_from_frame_id``, inlined for the receive path."""
-    pgn = (frame_id >> 8) & 0x3FFFF
-    return pgn & 0x3FF00 if (pgn >> 8) & 0xFF < 240 else pgn
+    below 240 (PDU1). cantools' own ``j1939.pgn_from_frame_id``, memoised: it costs ~26 µs
+    a call (bitstruct), and the receive path asks once per unrouted extended frame, of
+    the few hundred ids a bus repeats (a cached call: ~0.1 µs)."""
+    return int(cantools.j1939.pgn_from_frame_id(frame_id))
 
 
 @dataclass(frozen=True)
@@ -105,12 +110,28 @@ def load_dbc(path: str | Path) -> Database:
     if not path.is_file():
         raise CanEdgeError(f"{path}: DBC file not found")
     try:
-        db = cantools.database.load_file(str(path), strict=True)
+        db = cantools.database.load_file(str(path), strict=True, encoding=text_encoding(path))
     except Exception as exc:  # cantools raises a zoo of parser errors
         raise CanEdgeError(f"{path}: cannot load DBC: {exc}") from exc
     if not isinstance(db, Database):
         raise CanEdgeError(f"{path}: not a CAN database")
     return db
+
+
+def text_encoding(path: str | Path) -> str:
+    """The encoding a database file's text is read in: UTF-8 when its bytes are UTF-8
+    (``"°/h"`` is then ``°/h``, not cantools' cp1252 default's ``Â°/h``), else cp1252 (a
+    DBC editor's Windows default, byte 0xB0 for ``°``). Raises :class:`CanEdgeError` when
+    the file cannot be read."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise CanEdgeError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return "cp1252"
+    return "utf-8-sig" if raw.startswith(b"\xef\xbb\xbf") else "utf-8"
 
 
 def _message_ref(msg: Message) -> MessageRef:

@@ -7,18 +7,24 @@ The proposal is made from what a DBC says about a signal, never from our frame i
   mdeg/s, arcsec/s) is a drift candidate; a temperature (°C, degC, C, K, °F) a
   temperature candidate;
 * **name**: words such as drift, rate, gyro, omega (drift) and temp, tmp, therm
-  (temperature) add to the score; ambient/board/cpu/oil/coolant temperatures lose;
-  without any unit-matched signal a name match alone is proposed (and flagged);
+  (temperature) add to the score; a signal without a unit whose own name says so
+  (``YawRate``, ``GyroRate``, ``ZTemp``) is proposed by its name alone (and flagged), as is,
+  without any unit-matched signal, one whose message name says so; a status, mode or
+  checksum word, or a small raw integer, is no measurement;
 * **counter**: an unsigned integer signal (scale 1, offset 0, 2–16 bits, unitless) of the
   same message whose name says counter/cnt/seq/alive/rolling, present under the same
   multiplexer values as the signal it counts;
 * **pairing**: each drift signal is paired with the temperature signal that shares its
-  message (and multiplexer), or failing that its axis letter (x/y/z) or number; a
+  message (and multiplexer), or failing that its axis letter (x/y/z) or number; an
+  ambient, board, CPU, ... temperature loses to any other (a case or sensor temperature)
+  wherever it sits; ties go to the DBC's order; a
   temperature signal is mapped to one gyro only (the session maps each signal once), so a
   second gyro sharing it is reported as left out.
 
 Messages that carry the signal sets of the daemon's own frames (``dbc/README.md``) are
-recognised as such and never proposed as measurements.
+recognised as such and never proposed as measurements. A message the DBC marks
+``VFrameFormat`` ``J1939PG`` (cantools' ``protocol == "j1939"``) is a J1939 parameter
+group: :attr:`SignalInfo.j1939` (the session matches it by PGN).
 """
 
 from __future__ import annotations
@@ -67,8 +73,13 @@ _TEMP_UNITS = {"degc": "degC", "c": "degC", "celsius": "degC", "k": "K", "kelvin
                "degf": "degF", "f": "degF"}
 _DRIFT_WORDS = ("drift", "rate", "gyro", "gyr", "omega", "angvel", "angrate", "rot")
 _TEMP_WORDS = ("temp", "tmp", "temperature", "therm")
-_OTHER_TEMP_WORDS = ("ambient", "amb", "board", "pcb", "cpu", "mcu", "oil", "coolant",
-                     "water", "air", "outside", "cabin", "housing", "env")
+_OTHER_TEMP_WORDS = ("ambient", "amb", "board", "brd", "pcb", "cpu", "mcu", "oil",
+                     "coolant", "water", "air", "outside", "cabin", "env", "ecu")
+#: a temperature of the gyro itself: its case, housing, sensor
+_OWN_TEMP_WORDS = ("gyro", "gyr", "sensor", "imu", "rate", "case", "housing", "fog", "die")
+#: words of a signal that is no measurement (a blank-unit signal named by them is skipped)
+_NOT_MEASURED_WORDS = ("status", "stat", "state", "mode", "valid", "flag", "flags", "error",
+                       "err", "crc", "checksum", "chk", "diag", "fault", "qual", "quality")
 _COUNTER_WORDS = ("counter", "count", "cnt", "ctr", "seq", "sequence", "alive", "rolling",
                   "roll", "rc", "msgcnt", "sqc")
 
@@ -122,6 +133,7 @@ class SignalInfo:
     kind: str | None            # 'rate', 'temperature' or None (by unit)
     mux_ids: tuple[int, ...]    # multiplexer values that select it (empty: always there)
     score: float = 0.0
+    j1939: bool = False         # its message is a J1939 parameter group (VFrameFormat)
 
     def describe(self) -> str:
         return f"{self.message}.{self.signal}"
@@ -175,7 +187,7 @@ def _temp_score(msg: Message, sig: Signal) -> float:
     kind = unit_kind(sig.unit)
     score = 10.0 if kind == "temperature" else 0.0
     score += 3.0 * any(w in words for w in _TEMP_WORDS)
-    score += 2.0 * any(w in words for w in ("gyro", "gyr", "sensor", "imu", "rate"))
+    score += 2.0 * any(w in words for w in _OWN_TEMP_WORDS)
     score -= 5.0 * any(w in sig_words for w in _OTHER_TEMP_WORDS)
     return score
 
@@ -206,9 +218,33 @@ def _counter_for(msg: Message, info: SignalInfo) -> str | None:
     return None
 
 
+def _measured(sig: Signal) -> bool:
+    """Whether a signal can be a measurement: no value table (a state), no status, mode or
+    checksum word in its name, not a small raw integer (unsigned, scale 1, offset 0, at
+    most 8 bits: a flag or code)."""
+    if sig.choices or any(w in _NOT_MEASURED_WORDS for w in _words(sig.name)):
+        return False
+    raw = not sig.is_float and not sig.is_signed and float(sig.scale) == 1.0 \
+        and float(sig.offset) == 0.0
+    return not (raw and sig.length <= 8)
+
+
+def _named(sig: Signal, kind: str) -> bool:
+    """A signal without a unit whose own name says ``kind`` (``YawRate``, ``ZTemp``)."""
+    if (sig.unit or "").strip() or not _measured(sig):
+        return False
+    words = _DRIFT_WORDS if kind == "rate" else _TEMP_WORDS
+    return any(w in words for w in _words(sig.name))
+
+
 def _candidates(db: Database, daemon: set[str], kind: str) -> list[SignalInfo]:
+    """The signals that may carry ``kind``, best first: those with its unit, then those
+    whose own name says it (no unit); failing both, those whose message name says it
+    strongly. A stable sort: equal scores keep the DBC's order."""
     scorer = _drift_score if kind == "rate" else _temp_score
     found: list[SignalInfo] = []
+    named: set[tuple[str, str]] = set()
+    measured: set[tuple[str, str]] = set()
     for msg in db.messages:
         if msg.name in daemon:
             continue
@@ -218,16 +254,20 @@ def _candidates(db: Database, daemon: set[str], kind: str) -> list[SignalInfo]:
             score = scorer(msg, sig)
             found.append(SignalInfo(msg.name, msg.frame_id, bool(msg.is_extended_frame),
                                     sig.name, sig.unit or "", unit_kind(sig.unit),
-                                    _mux_ids(sig), score))
+                                    _mux_ids(sig), score, msg.protocol == "j1939"))
+            if _named(sig, kind):
+                named.add((msg.name, sig.name))
+            if _measured(sig):
+                measured.add((msg.name, sig.name))
     by_unit = [s for s in found if s.kind == kind]
-    if by_unit:
-        return sorted(by_unit, key=lambda s: -s.score)
-    # no unit says it: fall back to names that say it strongly (flagged by the caller)
-    # (a signal with a value table is a state, not a measurement)
-    enums = {(m.name, s.name) for m in db.messages for s in m.signals if s.choices}
+    by_name = [s for s in found if (s.message, s.signal) in named]
+    if by_unit or by_name:
+        return sorted(by_unit + by_name, key=lambda s: -s.score)
+    # no unit nor signal name says it: fall back to names (with the message's) that say
+    # it strongly (flagged by the caller)
     strong = 5.0 if kind == "rate" else 3.0
     return sorted([s for s in found if s.kind is None and s.score >= strong
-                   and (s.message, s.signal) not in enums], key=lambda s: -s.score)
+                   and (s.message, s.signal) in measured], key=lambda s: -s.score)
 
 
 def _pair_score(d: SignalInfo, t: SignalInfo) -> float:
@@ -283,8 +323,13 @@ def survey(db: Database, source: str = "DBC") -> Survey:
     if temps[0].kind is None:
         warnings.append("no signal has a temperature unit: temperature signals proposed by "
                         "name only; check them")
+    # best first: a gyro's own temperature before an ambient/board/CPU one wherever it
+    # sits, then by score; ties in the DBC's order
+    other = {j for j, t in enumerate(temps)
+             if any(w in _OTHER_TEMP_WORDS for w in _words(t.signal))}
     pairs = sorted(((_pair_score(d, t), i, j) for i, d in enumerate(drifts)
-                    for j, t in enumerate(temps)), reverse=True)
+                    for j, t in enumerate(temps)),
+                   key=lambda p: (p[2] in other, -p[0], p[1], p[2]))
     chosen: dict[int, int] = {}
     used_t: set[int] = set()
     for score, i, j in pairs:
@@ -381,9 +426,10 @@ def with_daemon_frames(db: Database, own: Database, drift_units: list[str],
     return merged
 
 
-def dump_dbc(db: Database, path: str | Path) -> None:
-    """Write ``db`` as a DBC file (cantools' writer)."""
+def dump_dbc(db: Database, path: str | Path, encoding: str = "cp1252") -> None:
+    """Write ``db`` as a DBC file (cantools' writer) in ``encoding`` (cantools' default
+    cp1252; the encoding the user's DBC was read in keeps every character it had)."""
     try:
-        cantools.database.dump_file(db, str(path))
+        cantools.database.dump_file(db, str(path), encoding=encoding)
     except Exception as exc:  # cantools' writer raises a zoo of errors
         raise CanEdgeError(f"{path}: cannot write DBC: {exc}") from exc

@@ -9,7 +9,6 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, TextIO
 
 from ..report import FORMATS
@@ -21,15 +20,26 @@ if TYPE_CHECKING:
 #: the python-can command-line options (``can.logger``, ``can.player``, ``can.viewer``)
 #: and the ``can.Bus`` argument each one sets
 BUS_OPTIONS = {"interface": "interface", "channel": "channel", "bitrate": "bitrate",
-               "fd": "fd", "data_bitrate": "data_bitrate"}
+               "fd": "fd", "data_bitrate": "data_bitrate", "app_name": "app_name"}
+
+
+def _bus_kwarg(text: str) -> tuple[str, Any]:
+    from ..can.busconfig import parse_bus_kwarg
+
+    try:
+        return parse_bus_kwarg(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_bus_args(p: Any) -> None:
-    """``-i/--interface``, ``-c/--channel``, ``-b/--bitrate``, ``--fd``, ``--data-bitrate``
-    as python-can's own tools spell them; each one given replaces that key of the session's
-    ``bus:`` (the other keys are passed to ``can.Bus`` as they are)."""
+    """``-i/--interface``, ``-c/--channel``, ``-b/--bitrate``, ``--fd``, ``--data-bitrate``,
+    ``--bus-kwargs KEY=VALUE...`` and ``--app-name`` as python-can's own tools spell them;
+    each one given replaces that key of the session's ``bus:``; a key given nowhere comes
+    from python-can's config (:mod:`gyrostand.can.busconfig`)."""
     g = p.add_argument_group(
-        "bus (python-can's options; each one given overrides that key of the session's bus:)")
+        "bus (python-can's options; each one given overrides that key of the session's "
+        "bus:, which overrides python-can's config: ~/.canrc, CAN_INTERFACE, ...)")
     g.add_argument("-i", "--interface", default=None, metavar="NAME",
                    help="python-can interface, e.g. socketcan, pcan, vector, kvaser, "
                         "remote, virtual")
@@ -41,20 +51,46 @@ def add_bus_args(p: Any) -> None:
     g.add_argument("--fd", action="store_true", default=None, help="open the bus in CAN FD mode")
     g.add_argument("--data-bitrate", dest="data_bitrate", type=int, default=None,
                    metavar="BIT/S", help="CAN FD data-phase bitrate, e.g. 2000000")
+    g.add_argument("--bus-kwargs", dest="bus_kwargs", nargs="+", type=_bus_kwarg,
+                   default=None, metavar="KEY=VALUE",
+                   help="more can.Bus arguments, typed as python-can types them (500000 an "
+                        "int, true a bool), e.g. --bus-kwargs serial=1234 "
+                        "receive_own_messages=true")
+    g.add_argument("--app-name", dest="app_name", default=None, metavar="NAME",
+                   help="application name of the interface's driver configuration "
+                        "(vector: the app_name in Vector Hardware Config)")
 
 
 def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``can.Bus`` arguments given on the command line (only those given)."""
-    return {key: getattr(args, opt) for opt, key in BUS_OPTIONS.items()
-            if getattr(args, opt, None) is not None}
+    """The ``can.Bus`` arguments given on the command line (only those given): the
+    ``--bus-kwargs``, then the options (as python-can's tools apply them, ``--bus-kwargs``
+    would win; an option and a ``--bus-kwargs`` of one key are refused as ambiguous)."""
+    options = {key: getattr(args, opt) for opt, key in BUS_OPTIONS.items()
+               if getattr(args, opt, None) is not None}
+    extra = dict(getattr(args, "bus_kwargs", None) or [])
+    both = sorted(set(options) & set(extra))
+    if both:
+        from ..errors import ConfigError
+
+        raise ConfigError(f"--bus-kwargs: {both[0]} is also given by its own option "
+                          f"(--{both[0].replace('_', '-')}); give it once")
+    return {**extra, **options}
 
 
 def with_bus_overrides(cfg: SessionConfig, args: argparse.Namespace) -> SessionConfig:
-    """``cfg`` with the command line's bus options merged over its ``bus:``."""
-    over = bus_overrides(args)
-    if not over:
-        return cfg
-    return dataclasses.replace(cfg, bus=MappingProxyType({**cfg.bus, **over}))
+    """``cfg`` with its bus resolved: the command line's bus options over the session's
+    ``bus:`` over python-can's config, and where each key came from (``cfg.bus_sources``).
+    A ConfigError when no source names an interface."""
+    from ..can.busconfig import resolve_bus
+    from ..errors import ConfigError
+
+    bus = resolve_bus(cfg.bus, bus_overrides(args))
+    if bus.values.get("interface") in (None, ""):
+        raise ConfigError(
+            f"{cfg.path}: bus.interface: not given: set it in the session file's bus:, with "
+            f"-i/--interface, or in python-can's config (~/.canrc: [default] interface = "
+            f"virtual; or env CAN_INTERFACE)")
+    return dataclasses.replace(cfg, bus=bus.values, bus_sources=bus.sources)
 
 
 def add_data_format_args(p: Any) -> None:
@@ -159,3 +195,27 @@ def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[st
         return x
     parse.__name__ = "number"
     return parse
+
+
+def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str | None:
+    """Why a run (``what``: ``replay``, ``run``) that decoded no frame measured nothing,
+    in one line (the frames received, why each was not decoded, the mapped messages, the
+    ids seen most often, the run folder, which is kept); None when it decoded a frame."""
+    dec = outcome.stats.get("decoder", {})
+    if dec.get("decoded", 0):
+        return None
+    kept = f"the run folder is kept: {outcome.run_dir}"
+    n = dec.get("received", 0)
+    if not n:
+        where = "in the log" if what == "replay" else "received on the bus"
+        return f"{what}: no CAN frame {where}, nothing measured; {kept}"
+    why = [f"{k} {v:,}" for k, v in dec.get("rejected", {}).items() if v]
+    if dec.get("ignored"):
+        why.insert(0, f"ignored {dec['ignored']:,} (DBC messages no channel maps)")
+    refs = {c.signal.message.key: c.signal.message
+            for g in cfg.gyros for c in (g.drift, g.temperature)}
+    mapped = ", ".join(f"{m.name} 0x{m.frame_id:X}" for m in refs.values())
+    seen = ", ".join(f"{i} ({c:,} frames)"
+                     for i, c in list(dec.get("unknown_ids", {}).items())[:5])
+    return (f"{what} decoded none of {n:,} frames ({', '.join(why)}); the mapped messages "
+            f"are {mapped}" + (f"; ids seen most: {seen}" if seen else "") + f"; {kept}")

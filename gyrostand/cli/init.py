@@ -48,8 +48,9 @@ def run(args: argparse.Namespace) -> int:
 
     bus = bus_overrides(args)
     if bus and "interface" not in bus:
-        raise ConfigError("init: give -i/--interface with -c/-b/--fd (or none of them: "
-                          "socketcan can0 is written)")
+        raise ConfigError("init: give -i/--interface with the other bus options (or none "
+                          "of them: socketcan can0 is written where this machine has it, "
+                          "else the virtual bus)")
     out = Path(args.output)
     sc = scaffold(args.dbc, out, bus=bus or None, name=args.name, id_base=args.id_base,
                   listen_only=args.listen_only)

@@ -16,6 +16,7 @@ from ..errors import CanEdgeError
 from .common import (
     add_data_format_args,
     add_format_args,
+    decoded_nothing,
     number,
     print_outcome,
     with_data_formats,
@@ -88,4 +89,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         for o in outcomes:
             emit(RunSummary(o, {}), args.format, sys.stdout)
-    return 0
+    empty = [why for o in outcomes if (why := decoded_nothing(o, cfg, "replay"))]
+    for why in empty:  # bad input: the logs hold nothing of this session's messages
+        print(f"error: {why}", file=sys.stderr)
+    return 2 if empty else 0

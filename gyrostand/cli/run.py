@@ -1,5 +1,5 @@
 """``gyrostand run CONFIG [-i IF] [-c CH] [-b BIT/S] [--fd] [--data-bitrate BIT/S]
-[--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the live daemon."""
+[--bus-kwargs KEY=VALUE...] [--app-name NAME] [--duration S] [--out DIR] [--idle] [--resume [RUN_DIR]]``: the live daemon."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from .common import (
     add_bus_args,
     add_data_format_args,
     add_format_args,
+    decoded_nothing,
     number,
     print_outcome,
     progress,
@@ -47,7 +48,9 @@ def add_parser(sub: Any) -> None:
                         "in raw-2.blf, raw-3.blf, ...")
     p.add_argument("--check", action="store_true",
                    help="validate the session file (keys, DBC, signal mapping, response "
-                        "frames) and print what it maps, without opening the bus")
+                        "frames) and print what it maps, with the source of each bus key "
+                        "(session file, command line, env, python-can config), without "
+                        "opening the bus")
     add_data_format_args(p)
     add_format_args(p, "the run's summary")
     p.set_defaults(func=run)
@@ -71,14 +74,21 @@ def run(args: argparse.Namespace) -> int:
     outcome = run_live(cfg, out=args.out, duration=args.duration, start_idle=args.idle,
                        on_ready=ready, resume=args.resume, on_waiting=waiting)
     print_outcome(outcome, sys.stdout, format=args.format)
+    empty = decoded_nothing(outcome, cfg, "run")
+    if empty is not None:  # frames none of which fit the session: bad input; none: a fault
+        print(f"error: {empty}", file=sys.stderr)
+        return 2 if outcome.stats["decoder"].get("received") else 1
     return 0 if outcome.ok else 1
 
 
 def describe_session(cfg: SessionConfig) -> str:
     """What a valid session maps, for ``run --check``."""
-    bus = ", ".join(f"{k}={v!r}" for k, v in cfg.bus.items())
+    from ..can.busconfig import SESSION_FILE, ResolvedBus
+
+    bus = ResolvedBus(cfg.bus, {k: cfg.bus_sources.get(k, SESSION_FILE) for k in cfg.bus})
     lines = [f"{cfg.path}: valid session {cfg.name!r}",
-             f"  bus (not opened): {bus}",
+             "  bus (not opened; after each key, where it came from):",
+             *(f"    {line}" for line in bus.describe()),
              f"  dbc: {cfg.dbc_path} ({len(cfg.db.messages)} messages)",
              f"  sampling: dt {cfg.sampling.dt:g} s; runs under {cfg.output}"]
     for g in cfg.gyros:
@@ -89,6 +99,7 @@ def describe_session(cfg: SessionConfig) -> str:
             mux = f" when {s.multiplexer} = {'/'.join(map(str, s.multiplexer_ids))}" \
                 if s.multiplexer else ""
             cnt = f", counter {ch.counter.name}" if ch.counter else ""
+            cnt += ", matched by J1939 PGN" if ch.match == "pgn" else ""
             lines.append(f"    {role:<12} {s.message.describe()}.{s.name} "
                          f"[{s.unit or 'no unit'}]{mux}{cnt}")
         if g.result is not None:

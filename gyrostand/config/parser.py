@@ -133,12 +133,7 @@ class _Parser(GyroSections, SimulateSection):
             missing = missing_packages(formats)
             if missing:
                 raise self.fail("session.formats", missing)
-        bus = top["bus"]
-        if not isinstance(bus, Mapping) or not bus:
-            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got {kind_of(bus)}")
-        if "interface" not in bus:
-            raise self.fail("bus.interface", "missing required key")
-        self.string(bus["interface"], "bus.interface")
+        bus = self.bus(top["bus"])
         self.dbc_name = self.string(top["dbc"], "dbc")
         dbc_path = (self.base / self.dbc_name).resolve()
         try:
@@ -169,6 +164,23 @@ class _Parser(GyroSections, SimulateSection):
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
             reconnect=reconnect,
         )
+
+    def bus(self, value: Any) -> dict[str, Any]:
+        """``bus:``, the ``can.Bus`` arguments: a mapping, maybe empty (``bus: {}``; a key
+        it lacks comes from the command line or python-can's own config, resolved by
+        :func:`gyrostand.can.busconfig.resolve_bus`); ``interface``, when given, a string."""
+        if value is None:
+            value = {}
+        if not isinstance(value, Mapping):
+            raise self.fail("bus", f"expected a mapping of can.Bus arguments, got "
+                                   f"{kind_of(value)}")
+        for key in value:
+            if not isinstance(key, str) or not key.isidentifier():
+                raise self.fail(f"bus.{clip(str(key), 40)}",
+                                "not a can.Bus argument name (expected an identifier)")
+        if "interface" in value:
+            self.string(value["interface"], "bus.interface")
+        return dict(value)
 
     def plugins(self, value: Any) -> tuple[str, ...]:
         """Load the term plugins (installed entry points, then ``plugins: [module, ...]``):

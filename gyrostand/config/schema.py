@@ -177,6 +177,10 @@ class SessionConfig:
     #: formats written beside the CSVs at the run's end (``session.formats``; of
     #: :data:`gyrostand.runfolder.layout.DATA_FORMATS`)
     formats: tuple[str, ...] = ()
+    #: where each key of ``bus`` came from (``session file``, ``command line``, ``env
+    #: CAN_CHANNEL``, ``python-can config ~/.canrc``; :mod:`gyrostand.can.busconfig`);
+    #: empty until the command line resolves the bus (then: every key of ``bus``)
+    bus_sources: Mapping[str, str] = field(default_factory=dict, compare=False)
 
     def gyro(self, name: str) -> GyroConfig:
         for g in self.gyros:

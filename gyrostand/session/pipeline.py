@@ -251,8 +251,15 @@ class Pipeline:
                             "resumed_bins": dict(self.resumed)}}
 
     def stats(self) -> dict[str, Any]:
+        """:meth:`counts`, and the ids not in the DBC seen most often
+        (``decoder.unknown_ids``: ``{"0x123": frames}``, 3 hex digits for a standard id, 8
+        for an extended one), the responses, commands and timing."""
+        counts = self.counts()
+        counts["decoder"]["unknown_ids"] = {
+            f"0x{i:08X}" if ext else f"0x{i:03X}": n
+            for i, ext, n in self.listener.unknown_ids()}
         return {
-            **self.counts(),
+            **counts,
             "responses": self.responses.stats(),
             "commands": dict(self.commands),
             "timing": {"bin_steps": len(self.step_ms),

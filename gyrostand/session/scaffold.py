@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gyrostand.can.dbc import load_dbc
+from gyrostand.can.dbc import load_dbc, text_encoding
 from gyrostand.can.survey import (
     GyroProposal,
     SignalInfo,
@@ -40,7 +40,7 @@ from gyrostand.can.survey import (
 )
 from gyrostand.errors import ConfigError
 
-__all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold"]
+__all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +61,9 @@ class Scaffold:
     merged_dbc: Any = None  # a cantools Database
     responses: dict[str, str] = field(default_factory=dict)
     results: dict[str, tuple[str, str]] = field(default_factory=dict)
+    #: the text encoding of the user's DBC (:func:`~gyrostand.can.dbc.text_encoding`),
+    #: which the merged DBC is written in
+    encoding: str = "cp1252"
 
 
 def _yaml_str(s: str) -> str:
@@ -91,7 +94,8 @@ def _match_results(gyros: list[GyroProposal], names: list[str]) -> dict[str, str
 
 def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str) -> str:
     counter_part = f", counter: {_yaml_str(counter)}" if counter else ""
-    return f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}}}"
+    match = ", match: pgn" if s.j1939 else ""  # any priority and source address
+    return f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}{match}}}"
 
 
 def _describe(s: SignalInfo, counter: str | None, db: Any) -> str:
@@ -103,8 +107,9 @@ def _describe(s: SignalInfo, counter: str | None, db: Any) -> str:
         mux = f", when {sel} = {'/'.join(str(i) for i in s.mux_ids)}"
     why = "unit" if s.kind else "name only: check"
     cnt = f"; counter {counter}" if counter else "; no rolling counter found"
+    pg = "; a J1939 PG (VFrameFormat J1939PG): matched by PGN" if s.j1939 else ""
     return (f"{s.message}.{s.signal} (0x{s.frame_id:X} {kind}, unit {s.unit or 'none'!r}"
-            f"{mux}; by {why}{cnt})")
+            f"{mux}; by {why}{cnt}{pg})")
 
 
 def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None = None,
@@ -112,7 +117,7 @@ def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None 
              listen_only: bool = False, own_dbc: str | Path = OWN_DBC) -> Scaffold:
     """Survey ``dbc`` and compose the session file to be written at ``out``.
 
-    ``bus`` the ``bus:`` section (default socketcan can0); ``name`` the session name
+    ``bus`` the ``bus:`` section (default :func:`default_bus`); ``name`` the session name
     (default the DBC's file stem). Raises :class:`~gyrostand.errors.ConfigError` /
     :class:`~gyrostand.errors.CanEdgeError` naming the file on a problem."""
     dbc = Path(dbc).resolve()
@@ -154,7 +159,8 @@ def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None 
             log.info("daemon frames at %s", ", ".join(f"{k} 0x{v:X}" for k, v in ids.items()))
     text = _render(sv, db, dbc, dbc_for_session, out, session_name, bus, responses, results,
                    origin)
-    return Scaffold(text, sv, dbc_for_session, merged, responses, results)
+    return Scaffold(text, sv, dbc_for_session, merged, responses, results,
+                    encoding=text_encoding(dbc).removesuffix("-sig"))
 
 
 def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
@@ -162,7 +168,11 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
             results: dict[str, tuple[str, str]], origin: str) -> str:
     rel = os.path.relpath(dbc_for_session, out.resolve().parent)
     today = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d")
-    bus = dict(bus or {"interface": "socketcan", "channel": "can0"})
+    bus_note = ["-i/-c/-b override it; a key left out comes from python-can's config "
+                "(~/.canrc)"]
+    if not bus:
+        bus, bus_note = default_bus(session_name)
+    bus = dict(bus)
     L = [f"# gyrostand session for {dbc.name}, written by `gyrostand init` on {today}.",
          "# The mapping below was proposed from the DBC's units and names: check every",
          "# line, then validate without opening the bus:",
@@ -175,10 +185,10 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
           "  output: runs                    # run folders go here (relative to this file)",
           "  fsync: true                     # each 1-s acknowledgement survives a power cut",
           "",
-          "bus:                              # passed to can.Bus(**bus); on the command line "
-          "-i/-c/-b override it"]
+          "bus:                              # passed to can.Bus(**bus)"]
+    L += [f"  # {line}" for line in bus_note]
     for k, v in bus.items():
-        L.append(f"  {k}: {json.dumps(v) if isinstance(v, str) else json.dumps(v)}")
+        L.append(f"  {k}: {json.dumps(v)}")
     L += ["", f"dbc: {json.dumps(rel)}", "",
           "sampling:",
           "  dt: 1.0                         # s, bin width", "", "gyros:"]
@@ -218,6 +228,25 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
     return "\n".join(L)
 
 
+def default_bus(session_name: str, channel: str = "can0"
+                ) -> tuple[dict[str, Any], list[str]]:
+    """The ``bus:`` ``init`` writes when none is given, and the comment lines above it:
+    SocketCAN's ``can0`` where this machine has it (:func:`socketcan_available`), else
+    python-can's ``virtual`` bus on a channel named after the session (``run`` and the
+    demo start at once; nothing from the stand arrives on it), with how to switch."""
+    from gyrostand.can.busconfig import socketcan_available
+
+    if socketcan_available(channel):
+        return ({"interface": "socketcan", "channel": channel},
+                [f"SocketCAN's {channel} (found here); -i/-c/-b override it"])
+    return ({"interface": "virtual", "channel": session_name},
+            ["SocketCAN is absent here (no AF_CAN socket or no can0), so python-can's",
+             "virtual bus is written: the session runs, but no stand frame reaches it.",
+             "On the stand write  interface: socketcan  and  channel: can0  (or pcan,",
+             "vector, kvaser, ...), run with -i socketcan -c can0, or delete both keys",
+             "and let python-can's config (~/.canrc, CAN_INTERFACE) name the bus."])
+
+
 def write_scaffold(sc: Scaffold, out: str | Path, *, force: bool = False) -> list[Path]:
     """Write the session file (and the merged DBC) at ``out``; refuse to overwrite either
     unless ``force``. Returns the paths written."""
@@ -228,6 +257,6 @@ def write_scaffold(sc: Scaffold, out: str | Path, *, force: bool = False) -> lis
             raise ConfigError(f"{p}: exists; pass --force to overwrite")
     out.parent.mkdir(parents=True, exist_ok=True)
     if sc.merged_dbc is not None:
-        dump_dbc(sc.merged_dbc, sc.dbc_path)
+        dump_dbc(sc.merged_dbc, sc.dbc_path, sc.encoding)
     out.write_text(sc.text, encoding="utf-8")
     return paths

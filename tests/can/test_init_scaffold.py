@@ -126,7 +126,7 @@ def test_run_check_does_not_open_the_bus_and_names_errors(tmp_path, capsys):
     out = _init(tmp_path, DATA / "foreign.dbc", "-i", "remote", "-c", "ws://127.0.0.1:9/")
     capsys.readouterr()
     assert main(["run", str(out), "--check"]) == 0  # nothing listens on port 9
-    assert "bus (not opened): interface='remote'" in capsys.readouterr().out
+    assert "    interface = 'remote'  (session file)\n" in capsys.readouterr().out
     out.write_text(out.read_text().replace("signal: YRate,", "signal: YRat,"))
     assert main(["run", str(out), "--check"]) == 2
     assert "gyros[1].drift.signal: 'YRat' is not a signal of message IMU_Y_RATE" in \

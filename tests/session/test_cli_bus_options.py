@@ -45,7 +45,8 @@ def test_options_override_only_the_keys_given():
                    "data_bitrate": 2000000}
     args = build_parser().parse_args(["run", "x.yaml", "--interface", "socketcan"])
     assert dict(with_bus_overrides(cfg, args).bus) == {**cfg.bus, "interface": "socketcan"}
-    assert with_bus_overrides(cfg, build_parser().parse_args(["run", "x.yaml"])) is cfg
+    same = with_bus_overrides(cfg, build_parser().parse_args(["run", "x.yaml"]))
+    assert same.bus == cfg.bus and set(same.bus_sources.values()) == {"session file"}
 
 
 def test_global_options_work_after_the_subcommand(tmp_path, capsys):

@@ -253,7 +253,13 @@ class ArrayPath(FramePath):
         rej.remote_frame += int(np.count_nonzero(fl != 0)) - nerr
         n.ignored += (int(np.count_nonzero(cs == _IGNORED))
                       + int(np.count_nonzero(ign[:stop])))
-        rej.unknown_id += int(np.count_nonzero(cs == _UNKNOWN))
+        unknown = cs == _UNKNOWN
+        nunk = int(np.count_nonzero(unknown))
+        rej.unknown_id += nunk
+        if nunk:
+            ids, per = np.unique(fa.key[:stop][unknown], return_counts=True)
+            for key, k in zip(ids.tolist(), per.tolist(), strict=True):
+                self._count_unknown(key, k)
         rt = cs >= 0
         rej.wrong_dlc += int(np.count_nonzero(rt & ~ok_len[:stop]))
         rej.bad_timestamp += int(np.count_nonzero(rt & ok_len[:stop] & ~finite[:stop]))

@@ -76,6 +76,7 @@ class FramePath(FrameTiming, CommandQueue):
             self._n.ignored += 1
         else:
             self._rej.unknown_id += 1
+            self._count_unknown(key)
             if self._pgn_hint:
                 self._unmatched(key)
 

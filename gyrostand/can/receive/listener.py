@@ -145,6 +145,7 @@ class DecodingListener(ArrayPath, can.Listener):
         with self._lock:
             self._n = Counts()
             self._rej = Rejections()
+            self._unknown = {}
 
     # -- the Notifier's callbacks ------------------------------------------------------
     def on_message_received(self, msg: can.Message) -> None:
@@ -212,6 +213,14 @@ class DecodingListener(ArrayPath, can.Listener):
             rej = {k: getattr(r, k) for k in REASONS}
             steps, held = self._steps, len(self._held)
         return DecodeStats(**counts, rejected=rej, clock_steps=steps, held=held)
+
+    def unknown_ids(self, n: int = 10) -> list[tuple[int, bool, int]]:
+        """The ``n`` ids not in the DBC seen most often since the counters were zeroed, as
+        ``(arbitration id, extended, frames)``, most frames first (then by id)."""
+        with self._lock:
+            items = list(self._unknown.items())
+        items.sort(key=lambda kv: (-kv[1], kv[0]))
+        return [(k & ~EXTENDED_KEY_BIT, bool(k & EXTENDED_KEY_BIT), c) for k, c in items[:n]]
 
     @property
     def gyro_names(self) -> Sequence[str]:

@@ -22,7 +22,8 @@ from gyrostand.can.receive.counts import Counts, Rejections
 if TYPE_CHECKING:
     from gyrostand.can.routes import ChannelMap, Route
 
-__all__ = ["ReceiveState", "Sample", "Held", "UNRANGED_LIMIT", "MAX_ROUTES", "DRIFT", "TEMP"]
+__all__ = ["ReceiveState", "Sample", "Held", "UNRANGED_LIMIT", "MAX_ROUTES", "MAX_UNKNOWN_IDS",
+           "DRIFT", "TEMP"]
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +39,8 @@ Held = tuple[float, "Route", list[Sample], list[tuple[tuple[int, int], int, int]
 UNRANGED_LIMIT = 1e12
 #: routes at most (ids cached for `match: pgn`: 8 priorities x 256 source addresses each)
 MAX_ROUTES = 65536
+#: distinct ids not in the DBC counted one by one (the ones past it only in ``unknown_id``)
+MAX_UNKNOWN_IDS = 1024
 
 
 class ReceiveState:
@@ -52,7 +55,8 @@ class ReceiveState:
     Counters by name: ``_n`` (:class:`Counts`), ``_rej`` (:class:`Rejections`).
     Routing: ``_routes`` (frame key -> route), ``_known`` (every key of the DBC),
     ``_by_pgn`` / ``_pgn_hint`` (J1939), ``_last_counter`` (rolling counter per
-    (gyro, channel)).
+    (gyro, channel)), ``_unknown`` (frames per key not in the DBC, at most
+    :data:`MAX_UNKNOWN_IDS` keys).
     """
 
     channels: ChannelMap
@@ -78,6 +82,7 @@ class ReceiveState:
     _by_pgn: dict[int, Route]
     _pgn_hint: dict[int, str]
     _hinted: set[int]
+    _unknown: dict[int, int]
     _array_decode: dict[int, object]
     _table: tuple | None
     _committing: bool
@@ -99,6 +104,15 @@ class ReceiveState:
         if route is not None and len(self._routes) < MAX_ROUTES:
             self._routes[key] = route
         return route
+
+    def _count_unknown(self, key: int, n: int = 1) -> None:
+        """Count ``n`` frames of ``key``, an id not in the DBC (by id while fewer than
+        :data:`MAX_UNKNOWN_IDS` ids are counted)."""
+        u = self._unknown
+        if key in u:
+            u[key] += n
+        elif len(u) < MAX_UNKNOWN_IDS:
+            u[key] = n
 
     def _unmatched(self, key: int) -> None:
         """Log once per id an extended frame whose PGN is a mapped message's (another
