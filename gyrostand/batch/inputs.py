@@ -102,13 +102,17 @@ def read_manifest(path: str | Path) -> list[tuple[str | None, RunSpec]]:
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     reader = csv.DictReader(text.splitlines())
-    cols = [c.strip() for c in (reader.fieldnames or [])]
+    try:
+        cols = [c.strip() for c in (reader.fieldnames or [])]
+        rows = list(reader)
+    except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() (128 KiB)
+        raise DataError(f"{path}: line {reader.reader.line_num}: not CSV ({exc})") from None
     if "path" not in cols:
         raise DataError(f"{path}: line 1: the manifest needs a 'path' column (got "
                         f"{', '.join(cols) or 'no header'})")
     base = path.resolve().parent
     out = []
-    for line, row in enumerate(reader, start=2):
+    for line, row in enumerate(rows, start=2):
         row = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
         if not any(row.values()):
             continue

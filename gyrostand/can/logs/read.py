@@ -27,6 +27,7 @@ from typing import Any, BinaryIO
 import can
 
 from gyrostand.can.logs.frames import Frame, frame_fields
+from gyrostand.can.logs.textlog import TEXT_SUFFIXES, read_text_log
 from gyrostand.errors import CanEdgeError
 
 __all__ = ["read_log", "read_logs", "read_log_arrays", "read_logs_arrays", "LogDamage"]
@@ -78,8 +79,9 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     Damage inside the file is skipped, counted in ``damage`` and logged with the file and
     the place: a BLF object (container) that cannot be decompressed or parsed is skipped
     (the next object is found by its signature); a BLF cut short inside its last object
-    (a kill while appending, a full disk, a truncated copy) is read up to the cut; an ASC
-    or candump line that cannot be parsed is skipped (file and line number named).
+    (a kill while appending, a full disk, a truncated copy) is read up to the cut; an ASC,
+    candump or CSV line that cannot be parsed or was cut short is skipped (file and line
+    number named, :mod:`~gyrostand.can.logs.textlog`).
     """
     path = Path(path)
     damage = damage if damage is not None else LogDamage()
@@ -89,8 +91,8 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     if suffix == ".blf":
         yield from _read_blf(path, damage)
         return
-    if suffix in (".asc", ".log"):
-        yield from _read_text(path, damage)
+    if suffix in TEXT_SUFFIXES:
+        yield from read_text_log(path, damage)
         return
     try:
         reader = can.LogReader(path)
@@ -112,12 +114,17 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
     parser when that declines), else as :class:`can.Message` objects."""
     from can.io import blf
 
+    size = path.stat().st_size
+    if size < blf.FILE_HEADER_STRUCT.size:  # python-can: "unpack requires a buffer ..."
+        raise CanEdgeError(f"{path}: not a BLF log: " + (
+            "empty file (0 bytes)" if size == 0 else
+            f"{size} bytes, shorter than a BLF file header "
+            f"({blf.FILE_HEADER_STRUCT.size} bytes)"))
     try:
         reader = blf.BLFReader(path)
     except Exception as exc:
         raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
     f = reader.file
-    size = path.stat().st_size
     head_s, cont_s = blf.OBJ_HEADER_BASE_STRUCT, blf.LOG_CONTAINER_STRUCT
     try:
         while True:
@@ -277,63 +284,6 @@ def _next_object(f: BinaryIO | io.BufferedIOBase, start: int, chunk: int = 1 << 
         if i >= 0:
             return pos + i
         pos += chunk
-
-
-class _Lines:
-    """A text file that counts the lines read from it (for the line number of a bad one)."""
-
-    def __init__(self, path: Path) -> None:
-        self.f = path.open("r", encoding="utf-8", errors="replace", newline=None)
-        self.n = 0
-        self.closed = False
-
-    def __iter__(self) -> _Lines:
-        return self
-
-    def __next__(self) -> str:
-        line = next(self.f)
-        self.n += 1
-        return line
-
-    def close(self) -> None:
-        self.closed = True
-        self.f.close()
-
-
-def _read_text(path: Path, damage: LogDamage) -> Iterator[can.Message]:
-    """ASC (absolute timestamps) or candump ``.log`` through python-can's reader; a line it
-    cannot parse is skipped and counted, and reading goes on with the next line (the
-    reader's state, e.g. ASC's start time and number base, carried over)."""
-    import copy
-
-    lines = _Lines(path)
-    try:
-        if path.suffix.lower() == ".asc":
-            reader: Any = can.ASCReader(lines, relative_timestamp=False)  # type: ignore[arg-type]
-        else:
-            reader = can.CanutilsLogReader(lines)  # type: ignore[arg-type]
-    except Exception as exc:
-        lines.close()
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
-    try:
-        at = -1
-        while True:
-            try:
-                yield from reader
-                return
-            except Exception as exc:
-                if lines.n == at:  # nothing more was read: not a line's fault
-                    raise CanEdgeError(f"{path}: corrupt CAN log after line {at}: "
-                                       f"{type(exc).__name__}: {exc}") from exc
-                at = lines.n
-                damage.lines += 1
-                damage.warn(f"{path}: line {lines.n}: cannot parse, skipped "
-                            f"({type(exc).__name__}: {exc})")
-                nxt = copy.copy(reader)  # same file (at the next line), same state
-                nxt._extract_header = lambda: None
-                reader = nxt
-    finally:
-        lines.close()
 
 
 def read_logs(paths: Iterable[str | Path], damage: LogDamage | None = None
