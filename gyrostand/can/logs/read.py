@@ -39,13 +39,16 @@ log = logging.getLogger(__name__)
 class LogDamage:
     """What reading a log skipped (:func:`read_log`): BLF objects (containers) that were
     damaged and skipped, ``truncated`` files (a last object cut short: read up to the cut),
-    text lines that could not be parsed, other top-level BLF objects (not frames), and the
-    first few warnings as text (``notes``)."""
+    text lines that could not be parsed, other top-level BLF objects (not frames), the
+    ``bytes`` of decompressed BLF data skipped to find the next intact object after damage
+    (the rest of an object spanning into the next container), and the first few warnings
+    as text (``notes``)."""
 
     containers: int = 0
     truncated: int = 0
     lines: int = 0
     other_objects: int = 0
+    bytes: int = 0
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -61,7 +64,7 @@ class LogDamage:
     def as_dict(self) -> dict[str, object]:
         return {"containers_skipped": self.containers, "truncated": self.truncated,
                 "lines_skipped": self.lines, "other_objects": self.other_objects,
-                "notes": list(self.notes)}
+                "bytes_skipped": self.bytes, "notes": list(self.notes)}
 
     def add(self, other: dict[str, object]) -> None:
         """Add counts sent by a reader process (:meth:`as_dict`)."""
@@ -69,6 +72,7 @@ class LogDamage:
         self.truncated += int(other["truncated"])  # type: ignore[call-overload]
         self.lines += int(other["lines_skipped"])  # type: ignore[call-overload]
         self.other_objects += int(other["other_objects"])  # type: ignore[call-overload]
+        self.bytes += int(other["bytes_skipped"])  # type: ignore[call-overload]
         self.notes += [str(n) for n in other["notes"]][:max(0, 20 - len(self.notes))]  # type: ignore[attr-defined]
 
 
@@ -126,6 +130,7 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
         raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
     f = reader.file
     head_s, cont_s = blf.OBJ_HEADER_BASE_STRUCT, blf.LOG_CONTAINER_STRUCT
+    lost = False  # after damage: the object stream is found again at an intact object
     try:
         while True:
             start = f.tell()
@@ -148,7 +153,7 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                 damage.containers += 1
                 damage.warn(f"{path}: damaged object at byte {start} skipped "
                             f"({(nxt if nxt is not None else size) - start} bytes)")
-                reader._tail = b""
+                reader._tail, lost = b"", True
                 if nxt is None:
                     return
                 f.seek(nxt)
@@ -185,18 +190,26 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                     return
                 damage.containers += 1
                 damage.warn(f"{path}: damaged container at byte {start} skipped ({exc})")
-                reader._tail = b""
+                reader._tail, lost = b"", True
                 continue
-            try:
-                if arrays:
-                    yield from _container_arrays(reader, data)
-                else:
-                    yield from reader._parse_container(data)
-            except Exception as exc:  # a parse error inside the container's objects
-                damage.containers += 1
-                damage.warn(f"{path}: damaged frames in the container at byte {start}: "
-                            f"the rest of it skipped ({type(exc).__name__}: {exc})")
-                reader._tail = b""
+            if lost:  # the container after damage: its data start inside an object
+                data = _resync(data, 0, damage, f"{path}: the container at byte {start}")
+                lost = False
+            while True:
+                tail = reader._tail
+                try:
+                    if arrays:
+                        yield from _container_arrays(reader, data)
+                    else:
+                        yield from reader._parse_container(data)
+                    break
+                except Exception as exc:  # a parse error inside the container's objects
+                    damage.containers += 1
+                    damage.warn(f"{path}: damaged frames in the container at byte {start} "
+                                f"({type(exc).__name__}: {exc})")
+                    reader._tail = b""
+                    data = _resync(tail + data, reader._pos + 1, damage,
+                                   f"{path}: the container at byte {start}")
             if cut and not (zobj is not None and zobj.unused_data):
                 damage.truncated += 1
                 damage.warn(f"{path}: cut short inside the container at byte {start} "
@@ -214,6 +227,36 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                 f.seek(nxt)
     finally:
         reader.stop()
+
+
+def _first_object(data: bytes, pos: int) -> int | None:
+    """Offset of the first intact-looking object header at or after ``pos`` in a container's
+    decompressed data (``LOBJ``, header version 1 or 2 with its size, an object no smaller
+    than its header; one too close to the end to check is taken), or None."""
+    from can.io.blf import OBJ_HEADER_BASE_STRUCT as head_s
+
+    while (i := data.find(b"LOBJ", pos)) >= 0:
+        if i + head_s.size > len(data):
+            return i
+        _, hsize, version, size, _ = head_s.unpack_from(data, i)
+        if hsize == {1: 32, 2: 40}.get(version) and size >= hsize:
+            return i
+        pos = i + 1
+    return None
+
+
+def _resync(data: bytes, pos: int, damage: LogDamage, where: str) -> bytes:
+    """``data`` from its first intact object at or after ``pos`` (nothing when none): the
+    bytes before it (the rest of a damaged object, or of one spanning from a damaged
+    container) are skipped, counted in ``damage.bytes`` and warned about."""
+    i = _first_object(data, pos)
+    skip = len(data) if i is None else i
+    if skip:
+        damage.bytes += skip
+        damage.warn(f"{where}: {skip} bytes skipped to " + (
+            f"the next intact object (at byte {skip} of its data)" if i is not None
+            else "its end (no intact object in it)"))
+    return data[skip:]
 
 
 def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
