@@ -159,3 +159,19 @@ def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[st
         return x
     parse.__name__ = "number"
     return parse
+
+
+def whole(minimum: int = 0) -> Callable[[str], int]:
+    """An argparse ``type``: a whole number >= ``minimum``; anything else is a usage error
+    naming the argument (exit status 2)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got "
+                                             f"{text[:40]!r}") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {text[:40]!r}")
+        return n
+    parse.__name__ = "whole number"
+    return parse
