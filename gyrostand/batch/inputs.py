@@ -70,9 +70,18 @@ def _expand(item: str) -> list[Path]:
     return [Path(item)]
 
 
+def _resolve(path: Path, where: str = "") -> Path:
+    """``path`` made absolute with its symlinks resolved; a symlink loop is an error naming
+    it (Python 3.11 raises RuntimeError, later versions OSError ELOOP)."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError) as exc:
+        raise DataError(f"{where}{path}: cannot resolve the path ({exc})") from None
+
+
 def _spec(path: Path, config: str | Path | None, attrs: dict[str, str], name: str | None,
           where: str) -> tuple[str | None, RunSpec]:
-    path = path.resolve()
+    path = _resolve(path, where)
     if path.is_dir():
         if not _is_run_folder(path):
             raise DataError(f"{where}{path}: not a run folder (no result.json, no raw.blf)")
@@ -84,7 +93,7 @@ def _spec(path: Path, config: str | Path | None, attrs: dict[str, str], name: st
                               "it: --config FILE, or a 'config' column in the manifest")
     else:
         raise DataError(f"{where}{path}: no such run folder or log file")
-    cfg = str(Path(config).resolve()) if config is not None else None
+    cfg = str(_resolve(Path(config), where)) if config is not None else None
     if cfg is not None and not Path(cfg).is_file():
         raise ConfigError(f"{where}{cfg}: no such session file")
     stem = path.name if kind == "folder" else path.stem
@@ -102,13 +111,17 @@ def read_manifest(path: str | Path) -> list[tuple[str | None, RunSpec]]:
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     reader = csv.DictReader(text.splitlines())
-    cols = [c.strip() for c in (reader.fieldnames or [])]
+    try:
+        cols = [c.strip() for c in (reader.fieldnames or [])]
+        rows = list(reader)
+    except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() (128 KiB)
+        raise DataError(f"{path}: line {reader.reader.line_num}: not CSV ({exc})") from None
     if "path" not in cols:
         raise DataError(f"{path}: line 1: the manifest needs a 'path' column (got "
                         f"{', '.join(cols) or 'no header'})")
-    base = path.resolve().parent
+    base = _resolve(path).parent
     out = []
-    for line, row in enumerate(reader, start=2):
+    for line, row in enumerate(rows, start=2):
         row = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
         if not any(row.values()):
             continue

@@ -55,11 +55,19 @@ def _drift_unit(subject: Subject) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..core.diagnose.allan import MIN_SAMPLES
     from ..core.ml.fit import ml
+    from ..errors import DataError
     from ..report.views import AllanView
     from ..workbench import open_subject
 
     subject = open_subject(args.run, gyro=args.gyro, model=args.model)
+    n = int(np.count_nonzero(np.isfinite(subject.samples.drift)))
+    if n < MIN_SAMPLES:  # before the ML fit, which may fail less clearly on so few
+        raise DataError(f"{subject.samples.source}: an Allan table needs at least "
+                        f"{MIN_SAMPLES} samples of drift, got {n}")
     unit = args.unit or _drift_unit(subject)
     emit(AllanView.of(subject, ml(subject.samples, subject.model), unit, args.level),
          args.format)

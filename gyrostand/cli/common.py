@@ -219,3 +219,19 @@ def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str |
                      for i, c in list(dec.get("unknown_ids", {}).items())[:5])
     return (f"{what} decoded none of {n:,} frames ({', '.join(why)}); the mapped messages "
             f"are {mapped}" + (f"; ids seen most: {seen}" if seen else "") + f"; {kept}")
+
+
+def whole(minimum: int = 0) -> Callable[[str], int]:
+    """An argparse ``type``: a whole number >= ``minimum``; anything else is a usage error
+    naming the argument (exit status 2)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got "
+                                             f"{text[:40]!r}") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {text[:40]!r}")
+        return n
+    parse.__name__ = "whole number"
+    return parse

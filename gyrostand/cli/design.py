@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ..plugins import available_terms
-from .common import number
+from .common import number, whole
 from .design_program import limits_of, program_document, program_lines, write_files
 
 
@@ -65,7 +65,7 @@ def add_parser(sub: Any) -> None:
                         "json` (its repeatability), instead of --param bias.spread=")
     p.add_argument("--doubt", default=None,
                    help="the parameters in doubt, comma-separated (default: every one)")
-    p.add_argument("--evaluations", type=int, default=120,
+    p.add_argument("--evaluations", type=whole(1), default=120,
                    help="likelihood-information evaluations per search start (120)")
     p.add_argument("--verify", type=int, default=0, metavar="N",
                    help="simulate N runs of the designed and of the reference profile, fit "

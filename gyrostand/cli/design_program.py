@@ -6,10 +6,12 @@ of text; shared by :mod:`.design` and :mod:`.design_separate` (``--separate A B`
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 from typing import Any
 
-__all__ = ["program_document", "limits_of", "write_files", "program_lines"]
+__all__ = ["program_document", "limits_of", "write_files", "program_lines",
+           "available_memory", "BYTES_PER_SAMPLE"]
 
 
 def program_document(program, limits) -> dict[str, Any]:
@@ -24,13 +26,45 @@ def program_document(program, limits) -> dict[str, Any]:
     }
 
 
+#: memory a design holds per sample of its time grid (bytes): ~190 measured (peak RSS of
+#: ``design --hours 6/24/96``, 3 parameters), with a margin for more parameters
+BYTES_PER_SAMPLE = 400
+
+
 def limits_of(args: argparse.Namespace, hours: float):
-    """The chamber limits of the command line (°C/min and min converted to SI)."""
+    """The chamber limits of the command line (°C/min and min converted to SI). Raises
+    :class:`~gyrostand.errors.ModelError` when the program's time grid could not fit in the
+    memory available (checked before anything is allocated)."""
     from ..core.design.search import ChamberLimits
 
-    return ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0, args.min_soak * 60.0,
-                         hours * 3600.0, legs=args.legs, lag=args.lag * 60.0,
-                         start=args.start)
+    limits = ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0,
+                           args.min_soak * 60.0, hours * 3600.0, legs=args.legs,
+                           lag=args.lag * 60.0, start=args.start)
+    samples = limits.duration / limits.dt + 1
+    need, free = samples * BYTES_PER_SAMPLE, available_memory()
+    if free is not None and need > free:
+        from ..errors import ModelError
+
+        raise ModelError(f"--hours {hours:g}: a {hours:g}-h program on a {limits.dt:g}-s grid "
+                         f"({samples:.3g} samples) needs about {need / 2**30:.3g} GiB of "
+                         f"memory, {free / 2**30:.3g} GiB is available: give fewer --hours")
+    return limits
+
+
+def available_memory() -> float | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the
+    free physical pages), or None when the system does not say."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
 
 
 def write_files(out: Path, program, goal: str, limits, case, ref_case, reference_record,

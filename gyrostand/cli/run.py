@@ -27,7 +27,7 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "run", help="run the daemon on the configured CAN bus",
         description="Listen on the session's bus, record every frame, bin, identify online, "
-                    "answer with result/status frames; on SIGINT/SIGTERM, --duration or a "
+                    "answer with result/status frames; on SIGINT/SIGTERM/SIGHUP, --duration or a "
                     "stop command write the final fit and report. Prints 'ready: RUN_DIR' "
                     "once listening ('waiting: ...' first while the bus cannot be opened "
                     "yet, with reconnect.at_start).")

@@ -259,7 +259,10 @@ class Samples:
         cols = [names.index(c) for c in wanted]
         rows: list[list[float]] = []
         lines: list[int] = []
-        body = list(reader)
+        try:
+            body = list(reader)
+        except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() (128 KiB)
+            raise DataError(f"{path}: line {reader.line_num}: not CSV ({exc})") from None
         torn = torn and bool(body) and len(body[-1]) < len(names)
         if torn:
             body.pop()

@@ -306,7 +306,11 @@ def read_estimates_csv(path: Path) -> dict[str, list[Any]]:
     other column as floats (``nan`` while unknown). A last line without its line end is
     torn (the run was killed while appending it): it is left out with a warning; a row
     with the wrong number of cells is an error naming its line."""
-    rows = list(csv.reader(read_lines(path)))
+    reader = csv.reader(read_lines(path))
+    try:
+        rows = list(reader)
+    except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() (128 KiB)
+        raise OutputError(f"{path}: line {reader.line_num}: not CSV ({exc})") from None
     if not rows or not rows[0] or rows[0][0] != "t":
         raise OutputError(f"{path}: not an estimates file (the header must start with t)")
     header = rows[0]

@@ -1,6 +1,6 @@
 """The bus side of a live run: opening it (with :class:`Backoff` while it cannot be opened
 yet), its :class:`can.Notifier` and the watch that tells a dead bus from bus errors
-(:class:`BusLink`), and SIGINT / SIGTERM as a stop request (:class:`StopSignals`).
+(:class:`BusLink`), and SIGINT / SIGTERM / SIGHUP as a stop request (:class:`StopSignals`).
 
 One backoff serves the start-up (``reconnect.at_start`` s) and the reopening after an
 outage (``reconnect.max_time`` s, in :mod:`~gyrostand.session.live`): ``first_delay`` s,
@@ -24,7 +24,8 @@ from ..config import ReconnectConfig, SessionConfig
 from ..errors import CanEdgeError
 from .responses import BusSink
 
-__all__ = ["BusLink", "NotifierWatch", "Backoff", "StopSignals", "open_bus_at_start"]
+__all__ = ["BusLink", "NotifierWatch", "Backoff", "StopSignals", "STOP_SIGNALS",
+           "open_bus_at_start"]
 
 log = logging.getLogger(__name__)
 
@@ -144,31 +145,47 @@ class Backoff:
         return wait
 
 
+#: the signals that end a run: Ctrl-C, ``kill`` / ``systemctl stop``, and a closing terminal
+#: (SIGHUP, where the platform has it); each ends it as SIGTERM does, never unfinished
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
+                     if hasattr(signal, n))
+
+
 class StopSignals:
-    """SIGINT / SIGTERM as a stop request, for as long as the ``with`` block runs (only in
-    the main thread, when ``enabled``; the previous handlers come back at its end).
+    """SIGINT / SIGTERM / SIGHUP (:data:`STOP_SIGNALS`) as a stop request, for as long as
+    the ``with`` block runs (only in the main thread, when ``enabled``; the previous
+    handlers come back at its end).
 
     The handler only appends the signal's name to :attr:`names` (an atomic append, no
     lock): a handler that called :meth:`threading.Event.set` could deadlock, since it runs
     in the main thread, which may hold that event's lock at that moment (inside
     ``Event.wait``). Waiters poll :meth:`is_set` (see :meth:`wait`), which then sets
-    ``stop``."""
+    ``stop``.
 
-    def __init__(self, stop: threading.Event, enabled: bool = True) -> None:
+    ``once``: the process ends with this block (the daemon). When a stop signal came, the
+    stop signals are *ignored* from its end on instead of getting their old handlers back:
+    the run is finished and its files written, and a second Ctrl-C (or a SIGHUP after a
+    SIGTERM) while the process closes its bus and exits must not kill it half-way
+    (``KeyboardInterrupt`` in the clean-up, exit -2 during the interpreter's shutdown)."""
+
+    def __init__(self, stop: threading.Event, enabled: bool = True, *,
+                 once: bool = False) -> None:
         self.stop = stop
         self.names: list[str] = []  # the signals received, in order
         self.enabled = enabled and threading.current_thread() is threading.main_thread()
+        self.once = once
         self._old: dict[signal.Signals, Any] = {}
 
     def __enter__(self) -> StopSignals:
         if self.enabled:
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            for sig in STOP_SIGNALS:
                 self._old[sig] = signal.signal(sig, self._on_signal)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        ignore = self.once and bool(self.names)
         for sig, handler in self._old.items():
-            signal.signal(sig, handler)
+            signal.signal(sig, signal.SIG_IGN if ignore else handler)
         self._old.clear()
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
@@ -200,7 +217,7 @@ def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
     (``reconnect.first_delay`` doubling up to ``max_delay``, :class:`Backoff`) for
     ``reconnect.at_start`` s. Raises :class:`CanEdgeError` (the last failure, with the time
     waited) when the time is up, at once for a bus that can never open, or when ``stop`` is
-    set / SIGINT or SIGTERM arrives (with ``handle_signals``, in the main thread) while
+    set / a stop signal arrives (:data:`STOP_SIGNALS`, with ``handle_signals``, in the main thread) while
     waiting. ``on_waiting(text)`` is called once when the waiting begins (the CLI prints
     it: a signal for whoever starts the bus after the daemon)."""
     rc = cfg.reconnect

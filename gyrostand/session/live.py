@@ -1,8 +1,8 @@
 """The live daemon: a bus, a :class:`can.Notifier`, and a worker loop around the pipeline.
 
 Threads: the Notifier's thread only runs the listeners (decode-and-append, record the raw
-frame, watch for bus errors); the worker loop (the calling thread, so SIGINT/SIGTERM reach
-it) pumps closed bins into :class:`~gyrostand.session.pipeline.Pipeline`, which identifies
+frame, watch for bus errors); the worker loop (the calling thread, so SIGINT / SIGTERM /
+SIGHUP reach it) pumps closed bins into :class:`~gyrostand.session.pipeline.Pipeline`, which identifies
 and sends response frames. When idle the worker polls every ``poll`` s (2 ms): that bounds
 the frame-to-result latency added by the loop. Once a second (wall clock) the worker
 *acknowledges*: the raw log is committed, then the pending bins are written to
@@ -21,7 +21,9 @@ run ends in state ``fault``.
 
 The run ends on (first wins):
 
-* SIGINT / SIGTERM (when ``handle_signals``) or ``stop_event``;
+* SIGINT / SIGTERM / SIGHUP (when ``handle_signals``) or ``stop_event``; a run stopped
+  by a signal then ignores the stop signals until the process exits (a second Ctrl-C
+  cannot cut the final fits or files short: :class:`StopSignals` ``once``);
 * a ``stop`` command frame;
 * ``duration`` s of **frame time** since the first accepted frame; if frames stop flowing,
   also once ``duration + 5`` s of wall time have passed since the first frame (or since
@@ -134,7 +136,7 @@ def run_live(cfg: SessionConfig, *, out: str | Path | None = None,
             cfg, run_dir, sink, source="live", start_idle=start_idle,
             before_flush=commit_raw, resume=state, sync=cfg.fsync, segments=segments))
         stopping = stack.enter_context(StopSignals(stop_event or threading.Event(),
-                                                   handle_signals))
+                                                   handle_signals, once=True))
         link.listeners += [pipe.listener, recorder.on_message_received]
         link.open(link.bus)
         try:

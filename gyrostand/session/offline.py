@@ -71,8 +71,9 @@ def run_replay(cfg: SessionConfig,
                 pipe.step([])
             if damage.total:
                 log.warning("%s: %d damaged part(s) of the log skipped (%d containers, %d "
-                            "truncated, %d lines)", what, damage.total, damage.containers,
-                            damage.truncated, damage.lines)
+                            "truncated, %d lines; %d bytes skipped to resynchronise)", what,
+                            damage.total, damage.containers, damage.truncated, damage.lines,
+                            damage.bytes)
             with progress.stage("replay", "final fits and report"):
                 return pipe.finish("end of log", truths=truths,
                                    extra_stats={"log": damage.as_dict()})

@@ -5,6 +5,8 @@
 - :mod:`~gyrostand.can.logs.read`: :func:`~gyrostand.can.logs.read.read_log` and
   friends, every format python-can reads, damage skipped and counted
   (:class:`~gyrostand.can.logs.read.LogDamage`).
+- :mod:`~gyrostand.can.logs.textlog`: ASC, candump and CSV logs read line by line, a
+  damaged line skipped and counted.
 - :mod:`~gyrostand.can.logs.blfarray`: BLF containers parsed as arrays
   (:class:`~gyrostand.can.logs.blfarray.FrameArrays`).
 - :mod:`~gyrostand.can.logs.reader`: the reader process

@@ -27,6 +27,7 @@ from typing import Any, BinaryIO
 import can
 
 from gyrostand.can.logs.frames import Frame, frame_fields
+from gyrostand.can.logs.textlog import TEXT_SUFFIXES, read_text_log
 from gyrostand.errors import CanEdgeError
 
 __all__ = ["read_log", "read_logs", "read_log_arrays", "read_logs_arrays", "LogDamage"]
@@ -38,13 +39,16 @@ log = logging.getLogger(__name__)
 class LogDamage:
     """What reading a log skipped (:func:`read_log`): BLF objects (containers) that were
     damaged and skipped, ``truncated`` files (a last object cut short: read up to the cut),
-    text lines that could not be parsed, other top-level BLF objects (not frames), and the
-    first few warnings as text (``notes``)."""
+    text lines that could not be parsed, other top-level BLF objects (not frames), the
+    ``bytes`` of decompressed BLF data skipped to find the next intact object after damage
+    (the rest of an object spanning into the next container), and the first few warnings
+    as text (``notes``)."""
 
     containers: int = 0
     truncated: int = 0
     lines: int = 0
     other_objects: int = 0
+    bytes: int = 0
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -60,7 +64,7 @@ class LogDamage:
     def as_dict(self) -> dict[str, object]:
         return {"containers_skipped": self.containers, "truncated": self.truncated,
                 "lines_skipped": self.lines, "other_objects": self.other_objects,
-                "notes": list(self.notes)}
+                "bytes_skipped": self.bytes, "notes": list(self.notes)}
 
     def add(self, other: dict[str, object]) -> None:
         """Add counts sent by a reader process (:meth:`as_dict`)."""
@@ -68,6 +72,7 @@ class LogDamage:
         self.truncated += int(other["truncated"])  # type: ignore[call-overload]
         self.lines += int(other["lines_skipped"])  # type: ignore[call-overload]
         self.other_objects += int(other["other_objects"])  # type: ignore[call-overload]
+        self.bytes += int(other["bytes_skipped"])  # type: ignore[call-overload]
         self.notes += [str(n) for n in other["notes"]][:max(0, 20 - len(self.notes))]  # type: ignore[attr-defined]
 
 
@@ -78,8 +83,9 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     Damage inside the file is skipped, counted in ``damage`` and logged with the file and
     the place: a BLF object (container) that cannot be decompressed or parsed is skipped
     (the next object is found by its signature); a BLF cut short inside its last object
-    (a kill while appending, a full disk, a truncated copy) is read up to the cut; an ASC
-    or candump line that cannot be parsed is skipped (file and line number named).
+    (a kill while appending, a full disk, a truncated copy) is read up to the cut; an ASC,
+    candump or CSV line that cannot be parsed or was cut short is skipped (file and line
+    number named, :mod:`~gyrostand.can.logs.textlog`).
     """
     path = Path(path)
     damage = damage if damage is not None else LogDamage()
@@ -89,8 +95,8 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     if suffix == ".blf":
         yield from _read_blf(path, damage)
         return
-    if suffix in (".asc", ".log"):
-        yield from _read_text(path, damage)
+    if suffix in TEXT_SUFFIXES:
+        yield from read_text_log(path, damage)
         return
     try:
         reader = can.LogReader(path)
@@ -112,13 +118,19 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
     parser when that declines), else as :class:`can.Message` objects."""
     from can.io import blf
 
+    size = path.stat().st_size
+    if size < blf.FILE_HEADER_STRUCT.size:  # python-can: "unpack requires a buffer ..."
+        raise CanEdgeError(f"{path}: not a BLF log: " + (
+            "empty file (0 bytes)" if size == 0 else
+            f"{size} bytes, shorter than a BLF file header "
+            f"({blf.FILE_HEADER_STRUCT.size} bytes)"))
     try:
         reader = blf.BLFReader(path)
     except Exception as exc:
         raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
     f = reader.file
-    size = path.stat().st_size
     head_s, cont_s = blf.OBJ_HEADER_BASE_STRUCT, blf.LOG_CONTAINER_STRUCT
+    lost = False  # after damage: the object stream is found again at an intact object
     try:
         while True:
             start = f.tell()
@@ -141,7 +153,7 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                 damage.containers += 1
                 damage.warn(f"{path}: damaged object at byte {start} skipped "
                             f"({(nxt if nxt is not None else size) - start} bytes)")
-                reader._tail = b""
+                reader._tail, lost = b"", True
                 if nxt is None:
                     return
                 f.seek(nxt)
@@ -178,18 +190,26 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                     return
                 damage.containers += 1
                 damage.warn(f"{path}: damaged container at byte {start} skipped ({exc})")
-                reader._tail = b""
+                reader._tail, lost = b"", True
                 continue
-            try:
-                if arrays:
-                    yield from _container_arrays(reader, data)
-                else:
-                    yield from reader._parse_container(data)
-            except Exception as exc:  # a parse error inside the container's objects
-                damage.containers += 1
-                damage.warn(f"{path}: damaged frames in the container at byte {start}: "
-                            f"the rest of it skipped ({type(exc).__name__}: {exc})")
-                reader._tail = b""
+            if lost:  # the container after damage: its data start inside an object
+                data = _resync(data, 0, damage, f"{path}: the container at byte {start}")
+                lost = False
+            while True:
+                tail = reader._tail
+                try:
+                    if arrays:
+                        yield from _container_arrays(reader, data)
+                    else:
+                        yield from reader._parse_container(data)
+                    break
+                except Exception as exc:  # a parse error inside the container's objects
+                    damage.containers += 1
+                    damage.warn(f"{path}: damaged frames in the container at byte {start} "
+                                f"({type(exc).__name__}: {exc})")
+                    reader._tail = b""
+                    data = _resync(tail + data, reader._pos + 1, damage,
+                                   f"{path}: the container at byte {start}")
             if cut and not (zobj is not None and zobj.unused_data):
                 damage.truncated += 1
                 damage.warn(f"{path}: cut short inside the container at byte {start} "
@@ -207,6 +227,36 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
                 f.seek(nxt)
     finally:
         reader.stop()
+
+
+def _first_object(data: bytes, pos: int) -> int | None:
+    """Offset of the first intact-looking object header at or after ``pos`` in a container's
+    decompressed data (``LOBJ``, header version 1 or 2 with its size, an object no smaller
+    than its header; one too close to the end to check is taken), or None."""
+    from can.io.blf import OBJ_HEADER_BASE_STRUCT as head_s
+
+    while (i := data.find(b"LOBJ", pos)) >= 0:
+        if i + head_s.size > len(data):
+            return i
+        _, hsize, version, size, _ = head_s.unpack_from(data, i)
+        if hsize == {1: 32, 2: 40}.get(version) and size >= hsize:
+            return i
+        pos = i + 1
+    return None
+
+
+def _resync(data: bytes, pos: int, damage: LogDamage, where: str) -> bytes:
+    """``data`` from its first intact object at or after ``pos`` (nothing when none): the
+    bytes before it (the rest of a damaged object, or of one spanning from a damaged
+    container) are skipped, counted in ``damage.bytes`` and warned about."""
+    i = _first_object(data, pos)
+    skip = len(data) if i is None else i
+    if skip:
+        damage.bytes += skip
+        damage.warn(f"{where}: {skip} bytes skipped to " + (
+            f"the next intact object (at byte {skip} of its data)" if i is not None
+            else "its end (no intact object in it)"))
+    return data[skip:]
 
 
 def _container_arrays(reader: Any, data: bytes) -> Iterator[Any]:
@@ -277,63 +327,6 @@ def _next_object(f: BinaryIO | io.BufferedIOBase, start: int, chunk: int = 1 << 
         if i >= 0:
             return pos + i
         pos += chunk
-
-
-class _Lines:
-    """A text file that counts the lines read from it (for the line number of a bad one)."""
-
-    def __init__(self, path: Path) -> None:
-        self.f = path.open("r", encoding="utf-8", errors="replace", newline=None)
-        self.n = 0
-        self.closed = False
-
-    def __iter__(self) -> _Lines:
-        return self
-
-    def __next__(self) -> str:
-        line = next(self.f)
-        self.n += 1
-        return line
-
-    def close(self) -> None:
-        self.closed = True
-        self.f.close()
-
-
-def _read_text(path: Path, damage: LogDamage) -> Iterator[can.Message]:
-    """ASC (absolute timestamps) or candump ``.log`` through python-can's reader; a line it
-    cannot parse is skipped and counted, and reading goes on with the next line (the
-    reader's state, e.g. ASC's start time and number base, carried over)."""
-    import copy
-
-    lines = _Lines(path)
-    try:
-        if path.suffix.lower() == ".asc":
-            reader: Any = can.ASCReader(lines, relative_timestamp=False)  # type: ignore[arg-type]
-        else:
-            reader = can.CanutilsLogReader(lines)  # type: ignore[arg-type]
-    except Exception as exc:
-        lines.close()
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
-    try:
-        at = -1
-        while True:
-            try:
-                yield from reader
-                return
-            except Exception as exc:
-                if lines.n == at:  # nothing more was read: not a line's fault
-                    raise CanEdgeError(f"{path}: corrupt CAN log after line {at}: "
-                                       f"{type(exc).__name__}: {exc}") from exc
-                at = lines.n
-                damage.lines += 1
-                damage.warn(f"{path}: line {lines.n}: cannot parse, skipped "
-                            f"({type(exc).__name__}: {exc})")
-                nxt = copy.copy(reader)  # same file (at the next line), same state
-                nxt._extract_header = lambda: None
-                reader = nxt
-    finally:
-        lines.close()
 
 
 def read_logs(paths: Iterable[str | Path], damage: LogDamage | None = None

@@ -48,12 +48,14 @@ from typing import Any
 
 import numpy as np
 
+from ...errors import DataError
 from ..data import Samples
 from ..model import Model, context
 from ..results import FitResult
 from .diagnostics import allan_deviation
 
 __all__ = [
+    "MIN_SAMPLES",
     "BIAS_FACTOR",
     "TERMS",
     "AllanFigure",
@@ -185,6 +187,10 @@ class AllanTable:
         }
 
 
+#: the fewest finite samples an Allan table is made of (τ up to n/8 needs a few octaves)
+MIN_SAMPLES = 16
+
+
 def _units(y: str) -> dict[str, str]:
     return {"angle_random_walk": f"{y}·√s", "bias_instability": y,
             "rate_random_walk": f"{y}/√s", "rate_ramp": f"{y}/s"}
@@ -195,12 +201,13 @@ def allan_table(x: np.ndarray, dt: float, *, unit: str = "y", label: str = "seri
     """Allan deviation of the rate series ``x`` (shape (n,), NaN gaps filled linearly;
     sampled every ``dt`` s) and its IEEE 952 figures with ``level`` intervals.
 
-    Raises ValueError for fewer than 16 finite samples."""
+    Raises :class:`~gyrostand.errors.DataError` (a ValueError) for fewer than
+    :data:`MIN_SAMPLES` finite samples."""
     x = np.asarray(x, dtype=float)
     n = int(x.size)
-    if int(np.count_nonzero(np.isfinite(x))) < 16:
-        raise ValueError(f"{label}: an Allan table needs at least 16 samples, got "
-                         f"{int(np.count_nonzero(np.isfinite(x)))}")
+    if int(np.count_nonzero(np.isfinite(x))) < MIN_SAMPLES:
+        raise DataError(f"{label}: an Allan table needs at least {MIN_SAMPLES} samples, got "
+                        f"{int(np.count_nonzero(np.isfinite(x)))}")
     warnings: list[str] = []
     finite = np.isfinite(x)
     gaps = n - int(np.count_nonzero(finite))
