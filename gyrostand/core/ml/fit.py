@@ -43,6 +43,7 @@ from ..validate import prepare, require_samples
 from .cov import covariance_from_hessian as covariance_from_hessian  # re-exported
 from .cov import hessian as hessian
 from .cov import observed_covariance
+from .plain import plain_shapes
 
 log = logging.getLogger(__name__)
 
@@ -439,8 +440,10 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     """
     evaluate = _Evaluator()
     try:
-        return _ml_fit(samples, model, evaluate, sigma, fixed, n_local, start, std_errors,
-                       hessian_passes)
+        res = _ml_fit(samples, model, evaluate, sigma, fixed, n_local, start, std_errors,
+                      hessian_passes)
+        return plain_shapes(res, model, fixed, lambda held, at: _ml_fit(
+            samples, model, evaluate, sigma, held, 1, at, std_errors, hessian_passes))
     finally:
         evaluate.close()
 

@@ -1,0 +1,47 @@
+"""A shape parameter at its plain shape: where ML's search range cannot reach it."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+
+from ...errors import IdentificationError
+from ..model import Model
+from ..results import FitResult
+
+
+def plain_shapes(res: FitResult, model: Model, fixed: Mapping[str, float] | None,
+                 refit: Callable[[dict[str, float], Mapping[str, float]], FitResult]
+                 ) -> FitResult:
+    """``res``, or the fit with a shape parameter at its plain shape where that is better.
+
+    A shape parameter whose plain shape (its default, e.g. no lag: τ = 0) lies below its
+    log-scale search range stops at the lower bound; the plain shape itself is then fitted
+    too (``refit(held, start)``: the parameter held at its default, the rest started at
+    ``res``) and kept when its likelihood is higher, the parameter reported held at the
+    default and still listed at its bound (the data put it there). Measured: a hidden
+    hysteresis (τ = 0) fitted with τ at its 3-s bound lost 13–30 in ln L to the plain
+    shape on 3 of 3 seeds, and the saturated reference called the model inadequate.
+    """
+    defaults = model.defaults
+    held = dict(fixed or {})
+    for name in res.info.get("at_bound", ()):
+        if name not in defaults or name in held or res.loglik is None:
+            continue
+        d = defaults[name]
+        v = res.parameters[name].value
+        if not d < v:
+            continue
+        try:
+            alt = refit({**held, name: d}, res.values)
+        except IdentificationError:
+            continue
+        if alt.loglik is not None and alt.loglik > res.loglik + 1e-6:
+            warnings = (*alt.warnings, *(w for w in res.warnings if name in w),
+                        f"ml: {name} is at its plain shape ({d:g}; ln L "
+                        f"{alt.loglik - res.loglik:+.2f} over its search bound {v:.3g})")
+            info = {**alt.info, "plain": [*alt.info.get("plain", ()), name],
+                    "at_bound": [*alt.info.get("at_bound", ()), name]}
+            res = dataclasses.replace(alt, warnings=tuple(dict.fromkeys(warnings)),
+                                      info=info)
+    return res
