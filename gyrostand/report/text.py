@@ -92,6 +92,9 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
                      f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
         if c.note:
             lines.append(f"  {'':<12} ({c.note})")
+        if c.traded:
+            lines.append(f"  {'':<12} (traded against {', '.join(c.traded)}: its refit "
+                         "moved the random part beyond ±3 std)")
     if rep.candidates:
         lines.append(f"  p from: {tests_used(rep.candidates)}")
     for la in rep.look_alikes:

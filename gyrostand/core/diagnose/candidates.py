@@ -52,6 +52,7 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -66,6 +67,7 @@ from ..ml.joint_problem import base_name
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
+from .reference import TRADE_STD
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate
 from .shapes import as_runs, shape_curvatures, shape_params
 
@@ -109,16 +111,20 @@ def _halved(term: str) -> bool:
     return term_class(term).null == "boundary"
 
 
-def refit(samples: Samples, model: Model, base: FitResult | None) -> FitResult:
-    """ML fit of ``model``, started from ``base`` where it shares parameters; several runs
-    (a tuple of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
+def refit(samples: Samples, model: Model, base: FitResult | None,
+          also: Mapping[str, float] | None = None) -> FitResult:
+    """ML fit of ``model``, started from ``base`` where it shares parameters (and from
+    ``base`` with ``also``'s values, e.g. the saturated reference's random part, so that a
+    fit whose random part absorbed a misfit is not the only start); several runs (a tuple
+    of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`)."""
     start = base.values if base is not None else None
     if isinstance(samples, tuple):
         from ..ml.joint import joint_ml
 
         return joint_ml(samples, model, start=start,  # type: ignore[return-value]
                         n_local=2 if base is not None else None, hessian_passes=1)
-    return ml(samples, model, start=start, n_local=2 if base is not None else None,
+    starts = [start, {**start, **also}] if start is not None and also else start
+    return ml(samples, model, start=starts, n_local=2 if base is not None else None,
               hessian_passes=1)
 
 
@@ -168,8 +174,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
     return ok, bound
 
 
-def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
-            ) -> list[tuple[FitResult | None, GyrostandError | None, float,
+def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
+            also: Mapping[str, float] | None = None) -> list[tuple[FitResult | None, GyrostandError | None, float,
                             tuple[float, ...]]]:
     """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
     that stopped it, seconds it took, the curvatures of its shape's range — ``()`` for a
@@ -189,7 +195,7 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
         t0 = time.perf_counter()
         shaped = calibrated(samples, model, term)
         try:
-            r = refit(samples, model.add(term), base)
+            r = refit(samples, model.add(term), base, also)
         except GyrostandError as exc:
             return None, exc, time.perf_counter() - t0, ()
         seconds = time.perf_counter() - t0
@@ -219,13 +225,33 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str]
         return [futures[i].result() for i in range(len(terms))]
 
 
+def traded(model: Model, base: FitResult, r: FitResult,
+           ref: Mapping[str, float] | None = None, k: float = TRADE_STD) -> tuple[str, ...]:
+    """The random-part parameters of ``base``'s model that the refit ``r`` moved beyond
+    ±``k`` of their std in ``base`` and away from the saturated reference's value ``ref``
+    (a move towards it is the misfit's inflation undone): what an added deterministic term
+    traded against."""
+    out = []
+    for n in model.param_names:
+        if model.term_of(n).role not in ("process", "noise") or n not in r.parameters:
+            continue
+        e = base.parameters[n]
+        v = r.parameters[n].value
+        towards = ref is not None and n in ref and abs(v - ref[n]) < abs(e.value - ref[n])
+        if e.std > 0 and abs(v - e.value) > k * e.std and not towards:
+            out.append(n)
+    return tuple(out)
+
+
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
-                    terms: list[str] | None = None) -> list[Candidate]:
-    """Refit ``model + c`` for each candidate ``c``; ranked best first (ΔBIC, then p)."""
+                    terms: list[str] | None = None,
+                    also: Mapping[str, float] | None = None) -> list[Candidate]:
+    """Refit ``model + c`` for each candidate ``c`` (started also from ``also``, see
+    :func:`refit`); ranked best first (ΔBIC, then p)."""
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
-    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo),
+    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo, also),
                                             strict=True):
         bigger = model.add(term)
         if r is None:
@@ -270,6 +296,7 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             loglik_after=float(r.loglik), effect={k: r.parameters[k] for k in new},
             seconds=seconds, result=r, identified=ident, at_bound=bound,
             stochastic=stochastic, note=note, test=test, shape_lkc=lkc, n_params=used,
+            traded=traded(model, base, r, also) if not stochastic else (),
         ))
     out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
     return out

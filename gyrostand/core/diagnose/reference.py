@@ -262,6 +262,7 @@ class Reference:
     fit: FitResult | None = None
     traded: tuple[str, ...] = ()
     lr_fixed: float = 0.0
+    noise_names: tuple[str, ...] = ()
     seconds: float = 0.0
 
     @property
@@ -467,7 +468,7 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
         noise_model, noise = ref_model, dict(fit.values)
     return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
                      partial=partial, noise_model=noise_model, noise=noise, fit=fit,
-                     lr_fixed=lr_fixed,
+                     lr_fixed=lr_fixed, noise_names=tuple(noise_names),
                      traded=traded, seconds=time.perf_counter() - t0)
 
 

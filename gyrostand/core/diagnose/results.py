@@ -29,7 +29,9 @@ class Candidate:
     parameter it adds has |estimate| ≥ 2 std and no flat direction involves it) and no
     time constant or rate of it sits at a search bound (``at_bound``). ``stochastic`` marks
     a random process (markov2, random_walk); ``competes`` names the candidate of the other
-    kind that explains the same failure, ``note`` says why one is not ranked.
+    kind that explains the same failure, ``note`` says why one is not ranked, ``traded``
+    names the random-part parameters its refit moved beyond ±3 std (the effect traded
+    against the random part rather than explaining a failure of the deterministic one).
     """
 
     term: str
@@ -51,6 +53,7 @@ class Candidate:
     test: str = "chi2"
     shape_lkc: tuple[float, ...] = ()
     n_params: int | None = None
+    traded: tuple[str, ...] = ()
 
     @property
     def ranked(self) -> bool:
@@ -68,6 +71,7 @@ class Candidate:
             "at_bound": list(self.at_bound), "stochastic": self.stochastic,
             "competes": self.competes, "note": self.note, "test": self.test,
             "shape_lkc": list(self.shape_lkc), "n_params": self.n_params,
+            "traded": list(self.traded),
         }
 
 

@@ -38,7 +38,13 @@ from .candidates import (
 )
 from .diagnostics import Diagnosis, diagnose_fit, segments
 from .prederror import ModelError, model_error
-from .reference import Reference, describe_missing, lack_of_fit_text, reference_fit
+from .reference import (
+    REPORT_ALPHA,
+    Reference,
+    describe_missing,
+    lack_of_fit_text,
+    reference_fit,
+)
 from .results import Candidate, Report
 
 
@@ -53,12 +59,28 @@ def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT,
                        noise=noise)
 
 
-def checks(fit: FitResult, samples: Samples, unit: str
-           ) -> tuple[Diagnosis, Reference | None, ModelError]:
-    """The residual diagnostics of ``fit``, its saturated reference (one run only) and its
-    model error with the reference's floor."""
-    ref = reference_fit(samples, fit.model, fit) if not isinstance(samples, tuple) else None
-    return diagnose_fit(fit, samples), ref, fit_error(fit, samples, unit, ref)
+def _reference(samples: Samples, fit: FitResult) -> Reference | None:
+    """The saturated reference of ``fit`` (one run only)."""
+    return reference_fit(samples, fit.model, fit) if not isinstance(samples, tuple) else None
+
+
+def checks(fit: FitResult, samples: Samples, unit: str, ref: Reference | None
+           ) -> tuple[Diagnosis, ModelError]:
+    """The residual diagnostics of ``fit`` and its model error with the floor of its
+    reference ``ref``."""
+    return diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref)
+
+
+def _also(ref: Reference | None) -> dict[str, float] | None:
+    """The reference's random part as a second start of the candidate refits, where it
+    differs from the fit's (a lack of fit at the reporting level)."""
+    if ref is None or ref.fit is None or not ref.p_value < REPORT_ALPHA:
+        return None
+    return {n: float(ref.fit.values[n]) for n in ref.noise_names}
+
+
+#: notes on a degenerate optimum: at least this many candidates, every LR this small
+DEGENERATE_MIN, DEGENERATE_LR = 3, 1e-6
 
 
 def verdict_reasons(diag: Diagnosis, err: ModelError, ref: Reference | None,
@@ -107,16 +129,18 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
     first = fit
     notes: list[str] = []
     cands: list[Candidate] = []
+    # the reference first: its random part is a second start of the candidate refits
+    ref = _reference(samples, fit)
     with ExitStack() as stack:
-        # the residual checks, the reference and the model error of the current fit need
-        # no candidate: from the main thread they run beside the refits
+        # the residual checks and the model error of the current fit need no candidate:
+        # from the main thread they run beside the refits
         early: Future | None = None
         if threading.current_thread() is threading.main_thread():
             side = stack.enter_context(
                 ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
-            early = side.submit(checks, first, samples, unit)
+            early = side.submit(checks, first, samples, unit, ref)
         for _ in range(3):
-            cands = rank_candidates(samples, model, fit, terms)
+            cands = rank_candidates(samples, model, fit, terms, also=_also(ref))
             m = max(len(cands), 1)
             alpha_each = alpha / m
             better = refit_from_candidates(samples, model, fit, cands, alpha_each)
@@ -127,13 +151,18 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                          f"{fit.loglik:.2f} → {better.loglik:.2f}) and every candidate "
                          "recomputed")
             fit = better
+            ref = _reference(samples, fit)
         m = max(len(cands), 1)
         alpha_each = alpha / m
         cands = order_competitors(samples, model, cands, alpha_each)
         if early is not None and fit is first:
-            diag, ref, err = early.result()
+            diag, err = early.result()
         else:
-            diag, ref, err = checks(fit, samples, unit)
+            diag, err = checks(fit, samples, unit, ref)
+    if len(cands) >= DEGENERATE_MIN and all(c.lr_stat < DEGENERATE_LR for c in cands):
+        notes.append("every candidate's LR is 0: the fit sits at a degenerate optimum (each "
+                     "refit, started also from the saturated reference's random part, "
+                     "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit)
     return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),

@@ -424,7 +424,8 @@ def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
 
 def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
        fixed: Mapping[str, float] | None = None, n_local: int | None = None,
-       start: Mapping[str, float] | None = None, std_errors: bool = True,
+       start: Mapping[str, float] | Sequence[Mapping[str, float]] | None = None,
+       std_errors: bool = True,
        hessian_passes: int = 2) -> FitResult:
     """Exact maximum-likelihood fit of every free parameter of ``model``.
 
@@ -433,7 +434,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         fixed: parameters held at given values.
         n_local: how many of the best grid starts get a local optimisation (default 2,
             or 5 when the model has several rates, whose likelihood has several basins).
-        start: extra start point (natural parameter values, e.g. a previous fit).
+        start: extra start point(s): natural parameter values (e.g. a previous fit).
         std_errors: compute standard errors from the observed information.
         hessian_passes: numerical Hessians behind them (the second with steps set from
             the first pass's stds; one pass is enough to judge identification).
@@ -450,7 +451,8 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
 
 def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float | None,
             fixed: Mapping[str, float] | None, n_local: int | None,
-            start: Mapping[str, float] | None, std_errors: bool,
+            start: Mapping[str, float] | Sequence[Mapping[str, float]] | None,
+            std_errors: bool,
             hessian_passes: int) -> FitResult:
     """:func:`ml_fit`, its likelihood evaluated by ``evaluate``."""
     fixed = dict(fixed or {})
@@ -463,8 +465,8 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     warnings = list(samples.warnings)
 
     starts = start_grid(prob, {"markov.beta": lsq_beta(samples, model)})
-    if start:
-        starts += starts_from(prob, starts, start)
+    for one in ([start] if isinstance(start, Mapping) else start or []):
+        starts += starts_from(prob, starts, one) if one else []
     z, info, more = optimise(prob, starts, n_local, evaluate)
     warnings += more
     at_bound = info.get("at_bound", [])
