@@ -247,3 +247,15 @@ def send_paced(bus: can.BusABC, frames: Sequence[can.Message], speed: float,
 
 def frame_key(f: can.Message) -> tuple:
     return (round(f.timestamp, 6), f.arbitration_id, bytes(f.data))
+
+
+def simulated_session(tmp: Path, duration: float = 300.0, drift_hz: float = 20,
+                      temp_hz: float = 10) -> tuple[Path, list[can.Message]]:
+    """A session file on the virtual bus in ``tmp`` and its simulated frames."""
+    from gyrostand.config import load_config
+    from gyrostand.session.offline import simulated_frames
+
+    cfg_path = write_config(tmp / "s.yaml", tmp / "runs", {"interface": "virtual"},
+                            sim={"duration": duration,
+                                 "rates": {"drift": drift_hz, "temperature": temp_hz}})
+    return cfg_path, list(simulated_frames(load_config(cfg_path)))

@@ -18,10 +18,8 @@ import pytest
 from can.io import blf
 
 from gyrostand.cli import main as cli_main
-from gyrostand.config import load_config
-from gyrostand.session.offline import simulated_frames
 
-from .procs import write_config
+from .procs import simulated_session
 
 
 def _containers(raw: bytes) -> list[tuple[int, int, bytes]]:
@@ -52,10 +50,7 @@ def _frame_spans(stream: bytes) -> list[tuple[int, int]]:
 @pytest.fixture(scope="module")
 def logged(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("resync")
-    cfg_path = write_config(tmp / "s.yaml", tmp / "runs", {"interface": "virtual"},
-                            sim={"duration": 300.0, "rates": {"drift": 20,
-                                                               "temperature": 10}})
-    frames = list(simulated_frames(load_config(cfg_path)))
+    cfg_path, frames = simulated_session(tmp)
     path = tmp / "whole.blf"
     with can.Logger(str(path)) as lg:
         for f in frames:

@@ -22,20 +22,15 @@ import can
 import pytest
 
 from gyrostand.cli import main as cli_main
-from gyrostand.config import load_config
-from gyrostand.session.offline import simulated_frames
 
-from .procs import write_config
+from .procs import simulated_session
 
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
     """A 300-s session (20 + 10 frames/s) and its frames."""
     tmp = tmp_path_factory.mktemp("text")
-    cfg_path = write_config(tmp / "s.yaml", tmp / "runs", {"interface": "virtual"},
-                            sim={"duration": 300.0, "rates": {"drift": 20,
-                                                               "temperature": 10}})
-    return cfg_path, list(simulated_frames(load_config(cfg_path)))
+    return simulated_session(tmp)
 
 
 def _log(path, frames):

@@ -67,7 +67,7 @@ from ..ml.joint_problem import base_name
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
-from .reference import TRADE_STD
+from .reference import moved
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate
 from .shapes import as_runs, shape_curvatures, shape_params
 
@@ -175,7 +175,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
 
 
 def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
-            also: Mapping[str, float] | None = None) -> list[tuple[FitResult | None, GyrostandError | None, float,
+            also: Mapping[str, float] | None = None
+            ) -> list[tuple[FitResult | None, GyrostandError | None, float,
                             tuple[float, ...]]]:
     """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
     that stopped it, seconds it took, the curvatures of its shape's range — ``()`` for a
@@ -223,24 +224,6 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
             ThreadPoolExecutor(max_workers=workers, thread_name_prefix="refit") as pool:
         futures = {i: pool.submit(one, terms[i]) for i in order}
         return [futures[i].result() for i in range(len(terms))]
-
-
-def traded(model: Model, base: FitResult, r: FitResult,
-           ref: Mapping[str, float] | None = None, k: float = TRADE_STD) -> tuple[str, ...]:
-    """The random-part parameters of ``base``'s model that the refit ``r`` moved beyond
-    ±``k`` of their std in ``base`` and away from the saturated reference's value ``ref``
-    (a move towards it is the misfit's inflation undone): what an added deterministic term
-    traded against."""
-    out = []
-    for n in model.param_names:
-        if model.term_of(n).role not in ("process", "noise") or n not in r.parameters:
-            continue
-        e = base.parameters[n]
-        v = r.parameters[n].value
-        towards = ref is not None and n in ref and abs(v - ref[n]) < abs(e.value - ref[n])
-        if e.std > 0 and abs(v - e.value) > k * e.std and not towards:
-            out.append(n)
-    return tuple(out)
 
 
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
@@ -296,7 +279,7 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             loglik_after=float(r.loglik), effect={k: r.parameters[k] for k in new},
             seconds=seconds, result=r, identified=ident, at_bound=bound,
             stochastic=stochastic, note=note, test=test, shape_lkc=lkc, n_params=used,
-            traded=traded(model, base, r, also) if not stochastic else (),
+            traded=moved(model, base, r.values, also) if not stochastic else (),
         ))
     out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
     return out

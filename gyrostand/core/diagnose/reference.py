@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -395,6 +396,18 @@ def _noise_names(model: Model) -> list[str]:
     return [n for n in model.param_names if model.term_of(n).role in ("process", "noise")]
 
 
+def moved(model: Model, base: FitResult, values: Mapping[str, float],
+          towards: Mapping[str, float] | None = None, k: float = TRADE_STD
+          ) -> tuple[str, ...]:
+    """The random-part parameters of ``model`` whose value in ``values`` lies beyond ±``k``
+    of their std in ``base``, unless closer than ``base``'s to ``towards`` (the reference's:
+    a move towards it undoes a misfit's inflation)."""
+    t = towards or {}
+    return tuple(n for n in _noise_names(model) if n in values
+                 and 0 < base.parameters[n].std * k < abs(values[n] - base.parameters[n].value)
+                 and not (n in t and abs(values[n] - t[n]) < abs(base.parameters[n].value - t[n])))
+
+
 def reference_fit(samples: Samples, model: Model, current: FitResult,
                   alpha: float = LACK_OF_FIT_ALPHA) -> Reference:
     """The saturated reference of ``model`` on ``samples`` beside the ``current`` fit.
@@ -435,11 +448,9 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     p.update({n: float(v) for n, v in zip(names, theta, strict=True)
               if n.startswith(NAME + ".")})
     partial = _partials(basis, p, cov, names, samples)
-    # the reference by exact ML, its random part free, the model's shapes held (with the
-    # basis beside them they would be nearly free: after a hidden hysteresis was added,
-    # LR 29.4 on 12 df with them free), started at the current fit and the GLS basis
-    # ... and the model's tangents along them beside it, fixed columns (the model's own
-    # freedom near its fit: a shape at a search bound is no lack of fit)
+    # the reference by exact ML, its random part free, the model's shapes held (free, with
+    # the basis beside them, a hidden hysteresis added gave LR 29.4 on 12 df) and their
+    # tangents as fixed columns; started at the current fit and the GLS basis
     tan = {f"T_{n.replace('.', '_')}": _tangent(model, current.values, samples, n)
            for n in shapes}
     if tan:
@@ -460,10 +471,7 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     traded: tuple[str, ...] = ()
     noise_model, noise = model, {n: float(current.values[n]) for n in noise_names}
     if df > 0 and pv < alpha:
-        traded = tuple(n for n in noise_names
-                       if current.parameters[n].std > 0
-                       and abs(current.values[n] - fit.values[n])
-                       > TRADE_STD * current.parameters[n].std)
+        traded = moved(model, current, fit.values)
     if traded:
         noise_model, noise = ref_model, dict(fit.values)
     return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
