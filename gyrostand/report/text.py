@@ -101,7 +101,9 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
         lines.append("")
         lines.append(f"look-alikes: {' and '.join(la['terms'])} explain the data about "
                      f"equally well here (ΔAIC {la['delta_aic'][0]:.1f} vs "
-                     f"{la['delta_aic'][1]:.1f}); to separate them: "
+                     f"{la['delta_aic'][1]:.1f}"
+                     + (f"; {la['terms'][1]}: {la['note']}" if "note" in la else "")
+                     + "); to separate them: "
                      + (f"design the run that does:\n  {la['command']}" if "command" in la
                         else la["advice"]))
     if rep.candidates and not rep.adequate and rep.significant:
@@ -155,6 +157,11 @@ def _with_ledger(body: str, view: DiagnosisView | FitStepView) -> str:
 
 # ---- fit ---------------------------------------------------------------------------------
 
+def _test(name: str) -> str:
+    """`` (the test)`` after an LR's df when it is not plain χ²(df)."""
+    return "" if name == "chi2" else f"; p from {TEST_TEXT.get(name, name)}"
+
+
 def fit_step(view: FitStepView) -> str:
     """Before and after of one model change side by side, the likelihood-ratio test."""
     step = view.step
@@ -184,13 +191,14 @@ def fit_step(view: FitStepView) -> str:
     if step.df == 0:
         lines.append(f"same number of parameters; 2 Δln L = {step.lr_stat:.2f}")
     elif step.bigger_is_after:
-        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df, p = {step.p_value:.3g}"
-                     f" (adding {', '.join(step.added)} "
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{_test(step.test)}, "
+                     f"p = {step.p_value:.3g} (adding {', '.join(step.added)} "
                      f"{'improves' if step.p_value < 0.05 else 'does not significantly improve'}"
                      f" the fit); residual RMS {change:+.2f} %")
     else:
         worse = step.p_value < 0.05
-        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df, p = {step.p_value:.3g}: "
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{_test(step.test)}, "
+                     f"p = {step.p_value:.3g}: "
                      + ("removing it makes the fit significantly worse"
                         if worse else "removing it costs no significant fit")
                      + f"; residual RMS {change:+.2f} %")

@@ -52,7 +52,7 @@ def run_joint_fit(subjects: Sequence[Subject], add: Sequence[str] = (),
     runs = [s.samples for s in subjects]
     before = joint_ml(runs, model)
     after = joint_ml(runs, new, start=before.values)
-    step = fit_step(before, after, add, remove)
+    step = fit_step(before, after, add, remove, tuple(runs))
     if record:
         sources = [s.samples.source for s in subjects]
         entry = step.to_dict()

@@ -12,10 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from ..core.chisq import chi2_sf
+from ..core.data import Samples
 from ..core.design.separation import design_command
+from ..core.diagnose.candidates import term_test
 from ..core.diagnose.prederror import ModelError
 from ..core.diagnose.reference import reference_fit
-from ..core.diagnose.results import Report
+from ..core.diagnose.results import TEST_CHI2, Report
 from ..core.diagnose.verdict import diagnose, fit_error
 from ..core.ml.fit import ml
 from ..core.model import Model
@@ -101,6 +104,9 @@ class FitStep:
     p_value: float
     before_error: ModelError | None = None
     after_error: ModelError | None = None
+    #: the p-value's reference distribution (:data:`~gyrostand.core.diagnose.results.TEST_SUP`
+    #: …): a one-term step gets the test its candidate gets in ``diagnose``
+    test: str = TEST_CHI2
 
     @property
     def bigger_is_after(self) -> bool:
@@ -117,6 +123,7 @@ class FitStep:
             "before": fit_summary(self.before, self.before_error),
             "after": fit_summary(self.after, self.after_error),
             "lr_stat": self.lr_stat, "df": self.df, "p_value": self.p_value,
+            "test": self.test,
             "warnings": list(self.after.warnings),
             "unit": self.after_error.unit if self.after_error is not None else DRIFT_UNIT,
         }
@@ -135,20 +142,32 @@ def changed_model(model: Model, add: Sequence[str], remove: Sequence[str]) -> Mo
 
 
 def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
+             samples: Samples | tuple[Samples, ...] | None = None,
              **errors: ModelError | None) -> FitStep:
     """The step from the fit ``before`` to ``after`` (one run's, or a joint fit's: the
-    degrees of freedom are the parameters the fits differ by) with its LR test."""
-    from scipy.stats import chi2
+    degrees of freedom are the parameters the fits differ by) with its LR test.
 
+    One term added or removed, with the ``samples`` the fits are of: the test ``diagnose``
+    gives that term as a candidate (:func:`~gyrostand.core.diagnose.candidates.term_test`:
+    the calibrated supremum over a shape, the boundary mixture, one more df for a nuisance
+    parameter), so that its df, LR and p are the same numbers in ``diagnose``, ``fit`` and
+    the ledger. Otherwise χ²(df), df the parameters the fits differ by."""
     assert before.loglik is not None and after.loglik is not None
     df = len(after.parameters) - len(before.parameters)
     # the test of the smaller model against the bigger one: LR = 2 (ln L_big − ln L_small)
     lr = 2.0 * (after.loglik - before.loglik)
     if df < 0 or (df == 0 and not add):
         lr = -lr
-    p = float(chi2.sf(max(lr, 0.0), abs(df))) if df else float("nan")
+    test = TEST_CHI2
+    if samples is not None and len(add) + len(remove) == 1 and df != 0:
+        small, big = (before, after) if add else (after, before)
+        df, p, test = term_test(samples, small.model, small, big, (*add, *remove)[0])
+        df = df if add else -df
+    else:
+        p = chi2_sf(max(lr, 0.0), abs(df)) if df else float("nan")
     return FitStep(before=before, after=after, added=tuple(add), removed=tuple(remove),
-                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0, **errors)
+                   lr_stat=float(lr), df=df, p_value=p if np.isfinite(p) else 1.0,
+                   test=test, **errors)
 
 
 def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (),
@@ -162,7 +181,7 @@ def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (
     errors = {f"{k}_error": fit_error(r, subject.samples, subject.unit,
                                       reference_fit(subject.samples, r.model, r))
               for k, r in (("before", before), ("after", after))}
-    step = fit_step(before, after, add, remove, **errors)
+    step = fit_step(before, after, add, remove, subject.samples, **errors)
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

@@ -63,11 +63,13 @@ def test_joint_diagnose_ranks_the_hidden_effect_first(tmp_path, capsys):
     for p in paths:
         steps = read_ledger(p.with_name(p.stem + ".ledger.jsonl"))
         assert steps[-1]["joint"] and steps[-1]["best_candidate"] == "temp_rate"
-    # the joint fit step: temp_rate added, its shared k and lag τ (df 2), the joint LR
+    # the joint fit step: temp_rate added (its shared k and lag τ), the joint LR on the
+    # df and test the joint diagnosis gave it (one coefficient, the sup over the shared lag)
     assert main(["fit", *map(str, paths), "--model", "markov,temp,bias", "--add",
                  "temp_rate", "--format", "json"]) == 0
     step = json.loads(capsys.readouterr().out)
-    assert step["df"] == 2 and step["p_value"] < 1e-3
+    assert (step["df"], step["test"]) == (first["df"], first["test"]) == (1, "sup over shape")
+    assert step["p_value"] < 1e-3
     assert step["lr_stat"] == pytest.approx(first["lr_stat"], rel=0.05, abs=0.5)
     assert "temp_rate.k" in step["parameters"] and "bias.b@5" in step["parameters"]
     assert read_ledger(paths[2].with_name("run3.ledger.jsonl"))[-1]["action"] == "fit"

@@ -228,9 +228,11 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
 
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
                     terms: list[str] | None = None,
-                    also: Mapping[str, float] | None = None) -> list[Candidate]:
+                    also: Mapping[str, float] | None = None,
+                    alpha: float = 0.05) -> list[Candidate]:
     """Refit ``model + c`` for each candidate ``c`` (started also from ``also``, see
-    :func:`refit`); ranked best first (ΔBIC, then p)."""
+    :func:`refit`); in :func:`ordered`'s order at ``alpha`` (Bonferroni over the
+    candidates, as the verdict)."""
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
@@ -241,23 +243,11 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             log.warning("candidate %s could not be fitted: %s", term, exc)
             continue
         assert base.loglik is not None and r.loglik is not None
-        # parameters the candidate adds (a per-run one once per run in a joint fit)
-        added = len(r.parameters) - len(base.parameters)
         lr = max(2.0 * (r.loglik - base.loglik), 0.0)
+        added = len(r.parameters) - len(base.parameters)
         new = [k for k in r.parameters if k not in base.parameters]
         shapes = shape_params(bigger, term) if lkc else ()
-        if shapes:
-            # the supremum of a χ² process over the shape (not identified under the null)
-            df = added - len(shapes)
-            p = sup_chi2_sf(lr, df, lkc)
-            test = TEST_SUP
-        else:
-            df = added + _extra_df(term)
-            p = chi2_sf(lr, df)
-            test = TEST_CHI2_EXTRA if _extra_df(term) else TEST_CHI2
-            if _halved(term):
-                p *= 0.5
-                test = TEST_MIXTURE
+        df, p, test = term_test(samples, model, base, r, term, lkc)
         # the parameters the fit uses: a shape parameter with a plain shape (its default:
         # no lag, the standard width) that the data do not determine (at a bound, or
         # flat) leaves the term that plain shape, and is not counted in ΔAIC/ΔBIC
@@ -281,25 +271,68 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             stochastic=stochastic, note=note, test=test, shape_lkc=lkc, n_params=used,
             traded=moved(model, base, r.values, also) if not stochastic else (),
         ))
-    out.sort(key=lambda c: (not c.ranked, c.delta_bic, c.p_value))
-    return out
+    return ordered(out, alpha / max(len(out), 1))
+
+
+def ordered(cands: list[Candidate], alpha_each: float) -> list[Candidate]:
+    """The table's order, the criterion ``diagnose`` states: the significant candidates
+    (ranked, p < ``alpha_each``) by ΔBIC, best first; then the other ranked ones, then the
+    unranked ones, each by p. An insignificant candidate is never above a significant one
+    (a 0-LR random walk on top of a table after a fit read as the best candidate)."""
+    def key(c: Candidate) -> tuple[int, float, float]:
+        if c.ranked and c.p_value < alpha_each:
+            return 0, c.delta_bic, c.p_value
+        return (1 if c.ranked else 2), c.p_value, c.delta_bic
+    return sorted(cands, key=key)
+
+
+def term_test(samples: Samples | tuple[Samples, ...], model: Model, base: FitResult,
+              r: FitResult, term: str, lkc: tuple[float, ...] | None = None
+              ) -> tuple[int, float, str]:
+    """The test of ``model + term`` (its fit ``r``) against ``model`` (its fit ``base``):
+    (df, p, the reference distribution's name), the one test a candidate gets in
+    ``diagnose`` and a one-term step in ``fit`` and the ledger (one number, one meaning).
+    ``lkc``: the curvatures of the term's shape range (:func:`shape_curvatures`) when
+    already measured; computed here when the term's test is calibrated."""
+    assert base.loglik is not None and r.loglik is not None
+    if lkc is None:
+        lkc = (shape_curvatures(samples, model, base, term)  # type: ignore[arg-type]
+               if calibrated(samples, model, term) else ())
+    # parameters the candidate adds (a per-run one once per run in a joint fit)
+    added = len(r.parameters) - len(base.parameters)
+    lr = max(2.0 * (r.loglik - base.loglik), 0.0)
+    shapes = shape_params(model.add(term), term) if lkc else ()
+    if shapes:
+        # the supremum of a χ² process over the shape (not identified under the null)
+        df = added - len(shapes)
+        return df, sup_chi2_sf(lr, df, lkc), TEST_SUP
+    df = added + _extra_df(term)
+    p = chi2_sf(lr, df)
+    if _halved(term):
+        return df, 0.5 * p, TEST_MIXTURE
+    return df, p, TEST_CHI2_EXTRA if _extra_df(term) else TEST_CHI2
 
 
 def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any]]:
-    """Significant candidates that explain the data about as well as the best one."""
+    """Candidates that explain the data about as well as the best significant one (ΔAIC
+    within max(4, 10 %)): the significant ones, and those significant and identified but
+    not ranked because a shape parameter sits at a search bound (their fit is as good;
+    only its shape is not pinned down), with that note."""
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    if len(sig) < 2:
+    if not sig:
         return []
     best = min(sig, key=lambda c: c.delta_aic)
+    near = [c for c in cands if c.p_value < alpha_each and c is not best and
+            (c.ranked or (c.identified and c.at_bound and not c.stochastic))]
     out = []
-    for c in sig:
-        if c is best:
-            continue
+    for c in near:
         if c.delta_aic - best.delta_aic < max(4.0, 0.1 * abs(best.delta_aic)):
             out.append({
                 "terms": [best.term, c.term],
                 "delta_aic": [best.delta_aic, c.delta_aic],
+                "lr_stat": [best.lr_stat, c.lr_stat],
                 "advice": separation(best.term, c.term) or FALLBACK_ADVICE,
+                **({"note": c.note} if not c.ranked else {}),
             })
     return out
 
@@ -394,5 +427,7 @@ def order_competitors(samples: Samples, model: Model, cands: list[Candidate],
                                              f"{other.term}: {why}")
     marked[other.term] = dataclasses.replace(
         marked[other.term], note=f"competes with {first.term}: tested again after it")
-    rest = [marked.get(c.term, c) for c in cands if c.term not in (first.term, other.term)]
-    return [marked[first.term], marked[other.term], *rest]
+    # the pair where the better of them stood: a stronger candidate stays above it
+    at = min(cands.index(first), cands.index(other))
+    rest = [c for c in cands if c.term not in (first.term, other.term)]
+    return [*rest[:at], marked[first.term], marked[other.term], *rest[at:]]

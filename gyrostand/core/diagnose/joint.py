@@ -51,7 +51,8 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
     effects by their joint likelihood ratio (:func:`~.candidates.rank_candidates` on the
     runs together)."""
     fit = joint_ml(runs, model)
-    cands = rank_candidates(tuple(runs), model, fit, terms)  # type: ignore[arg-type]
+    cands = rank_candidates(tuple(runs), model, fit, terms,  # type: ignore[arg-type]
+                            alpha=alpha)
     alpha_each = alpha / max(len(cands), 1)
     reasons = []
     for r in fit.runs:

@@ -140,7 +140,7 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                 ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
             early = side.submit(checks, first, samples, unit, ref)
         for _ in range(3):
-            cands = rank_candidates(samples, model, fit, terms, also=_also(ref))
+            cands = rank_candidates(samples, model, fit, terms, also=_also(ref), alpha=alpha)
             m = max(len(cands), 1)
             alpha_each = alpha / m
             better = refit_from_candidates(samples, model, fit, cands, alpha_each)
