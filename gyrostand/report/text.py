@@ -159,7 +159,9 @@ def _with_ledger(body: str, view: DiagnosisView | FitStepView) -> str:
 
 def _test(name: str) -> str:
     """`` (the test)`` after an LR's df when it is not plain χ²(df)."""
-    return "" if name == "chi2" else f"; p from {TEST_TEXT.get(name, name)}"
+    short = {"chi2 mixture": "½χ²(0) + ½χ²(df)", "chi2 +1 df": "χ², one df more",
+             "sup over shape": "sup over its shape"}
+    return "" if name == "chi2" else f" ({short.get(name, name)})"
 
 
 def fit_step(view: FitStepView) -> str:

@@ -43,7 +43,7 @@ def test_a_shaped_candidate_has_one_lr_df_and_p_everywhere(tmp_path, capsys):
     assert step["action"] == "fit" and step["test"] == top["test"]
     assert (step["lr_stat"], step["df"], step["p_value"]) == pytest_approx(
         (top["lr_stat"], top["df"], top["p_value"]))
-    assert f"LR = {top['lr_stat']:.2f} on 1 df; p from sup over the shape" in shown
+    assert f"LR = {top['lr_stat']:.2f} on 1 df (sup over its shape), p = " in shown
 
 
 def pytest_approx(values):

@@ -332,8 +332,9 @@ def _whitened(model: Model, p, samples: Samples, shapes: list[str]
 
 
 def _partials(basis: type[ReferenceBasis], p, cov: np.ndarray, names: list[str],
-              samples: Samples) -> tuple[Partial, ...]:
-    """Each group's partial effect on a grid of its variable, with bands."""
+              samples: Samples, scale: float = 1.0) -> tuple[Partial, ...]:
+    """Each group's partial effect on a grid of its variable, with bands; its Wald
+    statistic divided by ``scale`` (its null mean over df)."""
     b = basis()
     beta = p.get("markov.beta")
     T = np.asarray(samples.temp, dtype=float)
@@ -385,7 +386,7 @@ def _partials(basis: type[ReferenceBasis], p, cov: np.ndarray, names: list[str],
         w, V = np.linalg.eigh(C)
         keep = w > RANK_TOL * max(float(w.max()), 1e-300)
         z = V[:, keep].T @ theta
-        wald = float(np.sum(z * z / w[keep]))
+        wald = float(np.sum(z * z / w[keep])) / scale
         df = int(keep.sum())
         out.append(Partial(group, variable, unit, x, eff, std, wald, df,
                            chi2_sf(wald, df) if df else 1.0))
@@ -444,10 +445,9 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     rss_ref = float(np.sum((wy - W @ theta) ** 2))
     lr_fixed = max(rss_cur - rss_ref, 0.0)
     df = _rank(W) - _rank(W[:, own])
-    cov = np.linalg.pinv(W.T @ W, rcond=1e-12, hermitian=True)
     p.update({n: float(v) for n, v in zip(names, theta, strict=True)
               if n.startswith(NAME + ".")})
-    partial = _partials(basis, p, cov, names, samples)
+    basis0, ref_model0 = basis, ref_model
     # the reference by exact ML, its random part free, the model's shapes held (free, with
     # the basis beside them, a hidden hysteresis added gave LR 29.4 on 12 df) and their
     # tangents as fixed columns; started at the current fit and the GLS basis
@@ -474,6 +474,18 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
         traded = moved(model, current, fit.values)
     if traded:
         noise_model, noise = ref_model, dict(fit.values)
+    # the partial effects by GLS at the random part the floors use: the reference's when
+    # the misfit moved the fit's (at the fit's, inflated by the misfit, a cubic in T with
+    # a lack of fit LR 96 on 17 df showed no group: the temperature's Wald 4.7 on 7 df;
+    # at the reference's 435 on 9), its Wald then referred as the LR is (/ FREE_LR_SCALE:
+    # the basis trades with the random part's low frequencies)
+    at = {**p, **({n: float(fit.values[n]) for n in noise_names} if traded else {})}
+    W, wy, names = _whitened(ref_model0, at, samples, shapes)
+    theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
+    at.update({n: float(v) for n, v in zip(names, theta, strict=True)
+               if n.startswith(NAME + ".")})
+    partial = _partials(basis0, at, np.linalg.pinv(W.T @ W, rcond=1e-12, hermitian=True),
+                        names, samples, FREE_LR_SCALE if traded else 1.0)
     return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
                      partial=partial, noise_model=noise_model, noise=noise, fit=fit,
                      lr_fixed=lr_fixed, noise_names=tuple(noise_names),

@@ -1,0 +1,124 @@
+"""A sparse formula for a missing shape: the saturated reference's partial effect
+(:class:`~.reference.Partial`) fitted over a small library of physical forms.
+
+When the lack of fit is significant and no vocabulary term explains it, the reference shows
+*what shape* is missing — the drift at a soak at T, or over the time since switch-on, with
+bands. This module turns that curve into a formula a plugin term can carry: over the
+library
+
+* temperature: z², z³, z⁴ (z = (T − T₀)/S, T₀ the middle and S the half-range of the
+  record's temperatures) and a smooth step ½(1 + tanh((T − T_c)/w)) at T_c on a grid over
+  the range (w = 2 % of the range, at least 0.5 °C: a quantised sensor does not flip it);
+* time since switch-on: exp(−t/τ) for τ on a log grid from 2 % to 50 % of the record;
+
+the best subset of one or two forms (plus a constant and, for T, a linear part: what the
+model's bias and γ already carry) is fitted to the curve by weighted least squares,
+weights 1/std² of its band, and the smallest subset whose weighted residual is within
+10 % of the best pair's is kept (sparse: a second form must earn its place). The result
+has one shape g(x) = Σ a_j f_j(x), normalised to a peak of 1 over the record, so that a
+term carries a single coefficient: the drift's change at the shape's peak.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .reference import Partial
+
+__all__ = ["Formula", "sparse_formula", "SUPPORTED"]
+
+#: the partial-effect variables a formula is fitted for (the rate's shapes are the
+#: vocabulary's: temp_rate, temp_lag, hysteresis)
+SUPPORTED = ("T", "t")
+#: one form is kept unless its weighted residual exceeds the best pair's by this factor
+PAIR_GAIN = 1.10
+#: grid sizes of the step's T_c and the exponential's τ
+N_STEPS, N_TAUS = 41, 16
+
+
+@dataclass(frozen=True)
+class Formula:
+    """g(x) = Σ coef_j · form_j(x) / peak: the missing shape (peak |g| = 1 over ``x``).
+
+    ``forms``: (name, Python expression in ``x`` — the variable's numpy array — as a
+    generated term writes it); ``amplitude``: the drift's change at the peak (drift unit);
+    ``r2``: the share of the partial effect's weighted variation (around its constant and
+    linear part) the formula explains."""
+
+    variable: str
+    forms: tuple[tuple[str, str], ...]
+    coef: tuple[float, ...]
+    peak: float
+    amplitude: float
+    r2: float
+
+    def expression(self) -> str:
+        """The shape g(x) as one Python expression in ``x`` (``np`` is numpy)."""
+        terms = " + ".join(f"({c:.10g}) * ({e})" for (_, e), c in
+                           zip(self.forms, self.coef, strict=True))
+        return f"({terms}) / {self.peak:.10g}"
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return eval(self.expression(), {"np": np, "x": np.asarray(x, float)})
+
+
+def _library(q: Partial) -> list[tuple[str, str, Callable[[np.ndarray], np.ndarray]]]:
+    x = q.x
+    lo, hi = float(x.min()), float(x.max())
+    if q.variable == "T":
+        mid, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
+        out = []
+        for k in (2, 3, 4):
+            e = f"((x - {mid:.6g}) / {half:.6g}) ** {k}"
+            out.append((f"((T-{mid:.4g})/{half:.4g})^{k}", e, _fn(e)))
+        w = max(0.02 * (hi - lo), 0.5)
+        for tc in np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), N_STEPS):
+            e = f"0.5 * (1 + np.tanh((x - {tc:.4g}) / {w:.3g}))"
+            out.append((f"step at {tc:.1f} degC", e, _fn(e)))
+        return out
+    span = max(hi - lo, 1.0)
+    out = []
+    for tau in np.geomspace(0.02 * span, 0.5 * span, N_TAUS):
+        e = f"np.exp(-x / {tau:.5g})"
+        out.append((f"exp(-t/{tau:.0f} s)", e, _fn(e)))
+    return out
+
+
+def _fn(expr: str) -> Callable[[np.ndarray], np.ndarray]:
+    return lambda x: eval(expr, {"np": np, "x": x})
+
+
+def sparse_formula(q: Partial) -> Formula:
+    """The sparse formula of ``q``'s curve (:mod:`this module <.formula>`'s library and
+    rule); a :class:`ValueError` for a variable not in :data:`SUPPORTED`."""
+    if q.variable not in SUPPORTED:
+        raise ValueError(f"no formula library for the partial effect of {q.variable} "
+                         f"(the vocabulary's rate terms cover those shapes)")
+    x, y = q.x, q.effect
+    w = 1.0 / np.maximum(q.std, 1e-12 * max(float(np.abs(y).max()), 1e-300))
+    nuis = [np.ones_like(x)] + ([x - x.mean()] if q.variable == "T" else [])
+    lib = _library(q)
+    cols = [f(x) for _, _, f in lib]
+
+    def fit(idx: tuple[int, ...]) -> tuple[float, np.ndarray]:
+        A = np.column_stack(nuis + [cols[i] for i in idx]) * w[:, None]
+        coef, *_ = np.linalg.lstsq(A, y * w, rcond=None)
+        r = y * w - A @ coef
+        return float(r @ r), coef[len(nuis):]
+
+    base, _ = fit(())
+    ones = {(i,): fit((i,)) for i in range(len(lib))}
+    pairs = {p: fit(p) for p in itertools.combinations(range(len(lib)), 2)}
+    best1 = min(ones, key=lambda k: ones[k][0])
+    best2 = min(pairs, key=lambda k: pairs[k][0])
+    pick = best1 if ones[best1][0] <= PAIR_GAIN * pairs[best2][0] + 1e-9 * base else best2
+    rss, coef = (ones | pairs)[pick]
+    shape = sum(c * cols[i] for c, i in zip(coef, pick, strict=True))
+    peak = float(shape[np.argmax(np.abs(shape))])
+    return Formula(variable=q.variable, forms=tuple((lib[i][0], lib[i][1]) for i in pick),
+                   coef=tuple(float(c) for c in coef), peak=peak, amplitude=peak,
+                   r2=1.0 - rss / base if base > 0 else 0.0)

@@ -1,0 +1,91 @@
+"""``gyrostand term new --from RUN`` (issue 23 item 3): an effect outside the vocabulary —
+a cubic response to T — is shown by the reference, written as a plugin term by a sparse
+formula, and that term, added with ``fit --add``, makes the model adequate."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gyrostand.cli import main
+from gyrostand.core.data import Samples
+from gyrostand.core.diagnose.formula import sparse_formula
+from gyrostand.core.diagnose.reference import Partial
+from gyrostand.core.model import Model
+from gyrostand.core.profiles import chamber_profile
+from gyrostand.core.simulation import simulate
+
+BASE = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+        "white.sigma": 0.02, "bias.b": 0.3}
+
+
+def test_the_sparse_formula_names_the_form_of_a_known_curve():
+    x = np.linspace(20.0, 60.0, 41)
+    cubic = 3e-5 * (x - 40.0) ** 3 + 0.01 * x
+    q = Partial("temperature", "T", "degC", x, cubic, np.full_like(x, 0.01), 50.0, 5, 1e-8)
+    f = sparse_formula(q)
+    assert [n for n, _ in f.forms] == ["((T-40)/20)^3"] and f.r2 > 0.999
+    # a = the change at the peak; g has peak 1 on the curve's range
+    assert abs(f.amplitude) == pytest.approx(3e-5 * 20.0 ** 3, rel=1e-6)
+    assert np.max(np.abs(f(x))) == pytest.approx(1.0)
+    # a·g(x) is the curve beyond its constant and linear part
+    rest = cubic - f.amplitude * f(x)
+    assert np.ptp(rest - np.polyval(np.polyfit(x, rest, 1), x)) < 1e-9
+    step = 0.2 * (x > 45.0)
+    g = sparse_formula(Partial("temperature", "T", "degC", x, step, np.full_like(x, 0.01),
+                               50.0, 5, 1e-8))
+    assert g.forms[0][0].startswith("step at 4") and g.r2 > 0.9
+    with pytest.raises(ValueError, match="rate terms"):
+        sparse_formula(Partial("rate", "dT/dt", "degC/s", x, cubic, x, 1.0, 1, 0.5))
+
+
+def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys):
+    s = simulate(Model.parse("markov,temp,bias"), BASE, chamber_profile(3.0), seed=11)
+    rng = np.random.default_rng(3)
+    drift = s.drift + 4e-5 * (s.temp - 35.0) ** 3
+    temp = np.round((s.temp + 0.01 * rng.standard_normal(len(s))) / 0.05) * 0.05
+    csv = tmp_path / "cubic.csv"
+    Samples.from_arrays(s.t, drift, temp).to_csv(csv)
+
+    assert main(["term", "new", "--from", str(csv), "--name", "cubic_t"]) == 0
+    out = capsys.readouterr().out
+    assert "partial effect of T" in out, out
+    r2 = float(out.split("R² ")[1].split(";")[0])
+    assert r2 > 0.9, out
+    pkg = tmp_path / "gyrostand-cubic-t"
+    assert (pkg / "gyrostand_cubic_t.py").is_file() and (pkg / "pyproject.toml").is_file()
+    assert 'cubic_t = "gyrostand_cubic_t:CubicT"' in (pkg / "pyproject.toml").read_text()
+    assert main(["term", "new", "--from", str(csv), "--name", "cubic_t"]) == 2  # exists
+    assert "exists" in capsys.readouterr().err
+
+    # the generated module, registered as the session file's plugins: would, then the
+    # real command line: fit --add the term, diagnose the bigger model
+    script = (
+        "import sys, json, io, contextlib\n"
+        "from gyrostand.plugins import load_modules\n"
+        "load_modules(['gyrostand_cubic_t'])\n"
+        "from gyrostand.cli import main\n"
+        f"assert main(['fit', {str(csv)!r}, '--add', 'cubic_t', '--format', 'json']) == 0\n"
+        "buf = io.StringIO()\n"
+        "with contextlib.redirect_stdout(buf):\n"
+        f"    assert main(['diagnose', {str(csv)!r}, '--format', 'json', '-q']) == 0\n"
+        "print('DIAGNOSIS' + buf.getvalue())\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(pkg), os.environ.get(
+        "PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    fit_json, diag_json = r.stdout.split("DIAGNOSIS")
+    step = json.loads(fit_json)
+    assert step["added"] == ["cubic_t"] and step["p_value"] < 1e-6
+    a = step["parameters"]["cubic_t.a"]
+    assert abs(a["value"]) > 4 * a["std"]
+    d = json.loads(diag_json)
+    assert "cubic_t" in d["model"]
+    assert d["reference"]["significant"] is False, d["reference"]["p_value"]
+    assert d["adequate"] is True, d["reasons"]
