@@ -152,11 +152,12 @@ def invocation() -> str:
 
 def workbench_command(args: argparse.Namespace, command: str) -> str:
     """``command`` (e.g. ``fit``) on the data ``args`` names, as a line to paste: the
-    real path and the same ``--gyro``/``--model``/``--unit``/``--dt`` options."""
+    real path and the same ``--config``/``--gyro``/``--model``/``--unit``/``--dt``
+    options."""
     import shlex
 
     parts = [invocation(), command, shlex.quote(str(args.run))]
-    for opt in ("gyro", "model", "unit", "dt"):
+    for opt in ("config", "gyro", "model", "unit", "dt"):
         value = getattr(args, opt, None)
         if value is not None:
             parts += [f"--{opt}", shlex.quote(str(value))]
