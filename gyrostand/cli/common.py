@@ -16,6 +16,7 @@ from ..report import FORMATS
 if TYPE_CHECKING:
     from ..config import SessionConfig
     from ..session.pipeline import RunOutcome
+    from ..workbench import Subject
 
 #: the python-can command-line options (``can.logger``, ``can.player``, ``can.viewer``)
 #: and the ``can.Bus`` argument each one sets
@@ -150,18 +151,46 @@ def invocation() -> str:
     return f"{shlex.quote(sys.executable)} -m gyrostand"
 
 
-def workbench_command(args: argparse.Namespace, command: str) -> str:
+def workbench_command(args: argparse.Namespace, command: str,
+                      skip: tuple[str, ...] = ()) -> str:
     """``command`` (e.g. ``fit``) on the data ``args`` names, as a line to paste: the
     real path and the same ``--config``/``--gyro``/``--model``/``--unit``/``--dt``
-    options."""
+    options (less those in ``skip``, e.g. ``model`` for the step after a fit, whose
+    model the ledger holds)."""
     import shlex
 
     parts = [invocation(), command, shlex.quote(str(args.run))]
     for opt in ("config", "gyro", "model", "unit", "dt"):
-        value = getattr(args, opt, None)
+        value = None if opt in skip else getattr(args, opt, None)
         if value is not None:
             parts += [f"--{opt}", shlex.quote(str(value))]
     return " ".join(parts)
+
+
+def adopt_command(subject: Subject) -> str | None:
+    """``adopt RUN`` of a run folder subject as a line to paste, when its session file
+    does not hold the subject's model yet (else None: nothing to adopt, or no run)."""
+    import shlex
+
+    from ..config.edit import gyro_lists
+    from ..core.model import Model
+    from ..errors import GyrostandError
+    from ..runfolder import read_result
+
+    if subject.run_dir is None:
+        return None
+    try:
+        info = read_result(subject.run_dir)
+        session = Path(str(info.get("config") or ""))
+        written = gyro_lists(session.read_text(encoding="utf-8"), str(session))
+        model = written[subject.gyro].model
+    except (GyrostandError, OSError, KeyError, ValueError):
+        return None  # no session file to edit (moved, another gyro): no advice
+    if set(Model.parse(list(model)).names) == set(subject.model.names):
+        return None
+    several = len(info.get("gyros", {})) > 1
+    return " ".join([invocation(), "adopt", shlex.quote(str(subject.run_dir))]
+                    + (["--gyro", shlex.quote(subject.gyro)] if several else []))
 
 
 def progress(args: argparse.Namespace) -> TextIO:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from .common import add_format_args, emit, workbench_command
+from .common import add_format_args, adopt_command, emit, workbench_command
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
@@ -38,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
     with progress.stage("diagnose", "Allan tables"):
         allan = AllanView.of_diagnosis(subject, rep)
     emit(DiagnosisView(rep, f"{subject.samples.source} (gyro {subject.gyro})",
-                       subject.ledger_path, allan, workbench_command(args, "fit")),
+                       subject.ledger_path, allan, workbench_command(args, "fit"),
+                       adopt_command(subject) if rep.adequate else None),
          args.format)
     return 0
 
