@@ -8,15 +8,14 @@ import dataclasses
 import math
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from ..advice import invocation
 from ..report import FORMATS
 
 if TYPE_CHECKING:
     from ..config import SessionConfig
     from ..session.pipeline import RunOutcome
-    from ..workbench import Subject
 
 #: the python-can command-line options (``can.logger``, ``can.player``, ``can.viewer``)
 #: and the ``can.Bus`` argument each one sets
@@ -137,20 +136,6 @@ def emit(obj: Any, format: str, out: TextIO | None = None) -> None:
     (out or sys.stdout).write(render(obj, format))
 
 
-def invocation() -> str:
-    """gyrostand as the user ran it, to paste into a printed command: the console script
-    as typed (``.venv/bin/gyrostand``, or ``gyrostand`` when it is on PATH), else this
-    interpreter with ``-m gyrostand`` (``python -m gyrostand``, a test calling ``main``)."""
-    import os
-    import shlex
-    import shutil
-
-    argv0 = sys.argv[0] if sys.argv else ""
-    if Path(argv0).name == "gyrostand" and (os.sep in argv0 or shutil.which(argv0)):
-        return shlex.quote(argv0)
-    return f"{shlex.quote(sys.executable)} -m gyrostand"
-
-
 def workbench_command(args: argparse.Namespace, command: str,
                       skip: tuple[str, ...] = ()) -> str:
     """``command`` (e.g. ``fit``) on the data ``args`` names, as a line to paste: the
@@ -165,32 +150,6 @@ def workbench_command(args: argparse.Namespace, command: str,
         if value is not None:
             parts += [f"--{opt}", shlex.quote(str(value))]
     return " ".join(parts)
-
-
-def adopt_command(subject: Subject) -> str | None:
-    """``adopt RUN`` of a run folder subject as a line to paste, when its session file
-    does not hold the subject's model yet (else None: nothing to adopt, or no run)."""
-    import shlex
-
-    from ..config.edit import gyro_lists
-    from ..core.model import Model
-    from ..errors import GyrostandError
-    from ..runfolder import read_result
-
-    if subject.run_dir is None:
-        return None
-    try:
-        info = read_result(subject.run_dir)
-        session = Path(str(info.get("config") or ""))
-        written = gyro_lists(session.read_text(encoding="utf-8"), str(session))
-        model = written[subject.gyro].model
-    except (GyrostandError, OSError, KeyError, ValueError):
-        return None  # no session file to edit (moved, another gyro): no advice
-    if set(Model.parse(list(model)).names) == set(subject.model.names):
-        return None
-    several = len(info.get("gyros", {})) > 1
-    return " ".join([invocation(), "adopt", shlex.quote(str(subject.run_dir))]
-                    + (["--gyro", shlex.quote(subject.gyro)] if several else []))
 
 
 def progress(args: argparse.Namespace) -> TextIO:

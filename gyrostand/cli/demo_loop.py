@@ -122,7 +122,8 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     from ..report.views import DiagnosisView, FitStepView
     from ..session.offline import truth_params
     from ..workbench import open_subject, run_diagnose, run_fit
-    from .common import adopt_command, emit, invocation
+    from ..workbench.advice import adopt_command
+    from .common import emit, invocation
 
     prog = invocation()
     term, params = HIDDEN

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from .common import add_format_args, adopt_command, emit, workbench_command
+from .common import add_format_args, emit, workbench_command
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
@@ -26,6 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import progress
     from ..report.views import AllanView, DiagnosisView
     from ..workbench import run_diagnose
+    from ..workbench.advice import adopt_command
 
     if len(args.run) > 1:
         from ..workbench.joint import run_joint_diagnose

@@ -6,7 +6,7 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 from ..plugins import available_terms
-from .common import add_format_args, adopt_command, emit, workbench_command
+from .common import add_format_args, emit, workbench_command
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
@@ -52,6 +52,7 @@ def next_lines(args: argparse.Namespace, subject: Subject, step: FitStep) -> tup
     import dataclasses
 
     from ..workbench import read_ledger
+    from ..workbench.advice import adopt_command
 
     model = step.after.model
     adopt = adopt_command(dataclasses.replace(subject, model=model))

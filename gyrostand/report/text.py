@@ -395,8 +395,8 @@ def run_report(view: RunReport) -> str:
 def _report_page(page: ReportPage) -> str:
     """The report's diagnosis as text (``report --format text``), its Allan tables after."""
     s = page.subject
-    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})") + _allan_block(
-        page.allan)
+    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})", page.fit_command,
+                     page.adopt_command) + _allan_block(page.allan)
 
 
 def _allan_block(view: AllanView | None) -> str:

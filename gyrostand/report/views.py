@@ -214,6 +214,11 @@ class ReportPage:
     written: str
     version: str
     allan: AllanView | None = None
+    #: the next steps as lines to paste (:mod:`gyrostand.workbench.advice`): ``fit`` and
+    #: ``diagnose`` on this data, ``adopt`` of its run once ADEQUATE (None: no run)
+    fit_command: str = FIT_RUN
+    diagnose_command: str = "gyrostand diagnose RUN"
+    adopt_command: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return _with_allan(self.report.to_dict(), self.allan)

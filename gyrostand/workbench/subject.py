@@ -38,6 +38,8 @@ class Subject:
     run_dir: Path | None
     origin: str  # "run", "csv", "parquet" or "log" (:class:`~.inputs.Input`)
     unit: str = DRIFT_UNIT  # the drift's unit (deg/h from our DBC)
+    path: Path | None = None  # the input as it was named (a run folder, a file)
+    config: Path | None = None  # the session file that decoded a raw log
 
     @property
     def out_dir(self) -> Path:
@@ -64,7 +66,8 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
     current = (Model.parse(model) if model is not None
                else current_model(src.ledger, src.gyro, src.configured))
     return Subject(samples=src.samples, model=current, gyro=src.gyro, ledger_path=src.ledger,
-                   run_dir=src.run_dir, origin=src.origin, unit=unit or src.unit)
+                   run_dir=src.run_dir, origin=src.origin, unit=unit or src.unit,
+                   path=Path(path), config=Path(config) if config is not None else None)
 
 
 def open_subjects(paths: Sequence[str | Path], *, gyro: str | None = None,
