@@ -132,8 +132,8 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     print(f"demo: the stand's gyro has one physical effect more than the session's model "
           f"({models}); the workbench finds it (the truth is named at the end)",
           file=stream, flush=True)
-    step_header(1, "the daemon's run on the session's model", "gyrostand run SESSION",
-                stream)
+    step_header(1, "the daemon's run on the session's model",
+                f"{prog} run {shlex.quote(str(cfg.path))}", stream)
     first = daemon_run(hidden, out, stream, "run 1")
     print_outcome(first, stream, truth_params(cfg))
     if not first.ok:
