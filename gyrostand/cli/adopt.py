@@ -47,10 +47,11 @@ def _validated(path: Path) -> SessionConfig:
 
 def adopted_models(run_dir: Path, gyros: list[str] | None = None
                    ) -> dict[str, tuple[str, ...]]:
-    """Each gyro's current model in the run (the ledger's last step, else the configured
-    one), by gyro name."""
-    from ..core.model import Model
+    """Each gyro's current model in the run (its ledger's last step), by gyro name; a
+    gyro without a ledger step is left out (its model is the one the run was configured
+    with: adopting it could only undo a later edit of the session file)."""
     from ..runfolder import LEDGER, read_result
+    from ..workbench import read_ledger
     from ..workbench.subject import current_model
 
     info = read_result(run_dir)
@@ -58,9 +59,9 @@ def adopted_models(run_dir: Path, gyros: list[str] | None = None
     for g in gyros or []:
         if g not in known:
             raise DataError(f"{run_dir}: no gyro {g!r} (the run has {', '.join(known)})")
-    return {g: current_model(run_dir / LEDGER, g,
-                             known[g].get("model") or Model.parse("markov,temp").names).names
-            for g in (gyros or list(known))}
+    stepped = {e.get("gyro") for e in read_ledger(run_dir / LEDGER) if "model" in e}
+    return {g: current_model(run_dir / LEDGER, g, known[g].get("model") or ()).names
+            for g in (gyros or list(known)) if g in stepped}
 
 
 def plan(text: str, models: dict[str, tuple[str, ...]], source: str
@@ -132,6 +133,10 @@ def run(args: argparse.Namespace) -> int:
                           f"{exc}") from exc
     text = path.read_text(encoding="utf-8")
     models = adopted_models(run_dir, args.gyro)
+    if not models:
+        print(f"{run_dir}: its ledger has no model step (diagnose, fit): the run's model is "
+              f"the one it was configured with; nothing to adopt into {path}")
+        return 0
     new_models, new_ids, notes = plan(text, models, str(path))
     if not new_models:
         now = "; ".join(f"{g}: {','.join(m)}" for g, m in models.items())

@@ -57,6 +57,8 @@ def test_adopt_edits_the_model_line_only_and_the_daemon_s_next_run_uses_it(tmp_p
     assert result["gyros"]["az"]["model"] == ["markov", "temp", "white"]
 
     capsys.readouterr()
+    assert main(["adopt", str(run)]) == 0  # no workbench step yet: nothing to adopt
+    assert "its ledger has no model step" in capsys.readouterr().out
     assert main(["fit", str(run), "--add", "temp2", "-q"]) == 0
     out = capsys.readouterr().out
     assert f"gyrostand diagnose {run}\n" in out  # the verdict first ...
