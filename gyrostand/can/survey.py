@@ -48,6 +48,7 @@ __all__ = [
     "Survey",
     "survey",
     "unit_kind",
+    "temperature_unit",
     "daemon_frame_ids",
     "with_daemon_frames",
     "dump_dbc",
@@ -89,6 +90,15 @@ def _norm_unit(unit: str | None) -> str:
     u = u.replace("°", "deg").replace("º", "deg").replace("degree", "deg").replace("degs", "deg")
     u = u.replace("/sec", "/s").replace("/hour", "/h").replace("/hr", "/h")
     return u.replace("per", "/")
+
+
+def temperature_unit(unit: str | None) -> str | None:
+    """``'degC'``, ``'K'`` or ``'degF'`` for a DBC temperature unit, else None.
+
+    >>> temperature_unit("°C"), temperature_unit("kelvin"), temperature_unit("V")
+    ('degC', 'K', None)
+    """
+    return _TEMP_UNITS.get(_norm_unit(unit))
 
 
 def unit_kind(unit: str | None) -> str | None:

@@ -18,7 +18,7 @@ from ..errors import GyrostandError
 #: the subcommands, in ``--help`` order: each is the module of its name here, whose
 #: ``add_parser`` adds it (imported when a parser with it is built)
 COMMANDS = ("init", "run", "replay", "simulate", "demo", "identify", "diagnose", "fit",
-            "report", "allan", "export", "design", "batch", "term")
+            "adopt", "report", "allan", "export", "design", "batch", "term")
 #: commands that are (or start) the daemon: no progress output (its stderr is a journal)
 DAEMON_COMMANDS = ("run",)
 

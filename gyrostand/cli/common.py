@@ -8,9 +8,9 @@ import dataclasses
 import math
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from ..advice import invocation
 from ..report import FORMATS
 
 if TYPE_CHECKING:
@@ -136,28 +136,17 @@ def emit(obj: Any, format: str, out: TextIO | None = None) -> None:
     (out or sys.stdout).write(render(obj, format))
 
 
-def invocation() -> str:
-    """gyrostand as the user ran it, to paste into a printed command: the console script
-    as typed (``.venv/bin/gyrostand``, or ``gyrostand`` when it is on PATH), else this
-    interpreter with ``-m gyrostand`` (``python -m gyrostand``, a test calling ``main``)."""
-    import os
-    import shlex
-    import shutil
-
-    argv0 = sys.argv[0] if sys.argv else ""
-    if Path(argv0).name == "gyrostand" and (os.sep in argv0 or shutil.which(argv0)):
-        return shlex.quote(argv0)
-    return f"{shlex.quote(sys.executable)} -m gyrostand"
-
-
-def workbench_command(args: argparse.Namespace, command: str) -> str:
+def workbench_command(args: argparse.Namespace, command: str,
+                      skip: tuple[str, ...] = ()) -> str:
     """``command`` (e.g. ``fit``) on the data ``args`` names, as a line to paste: the
-    real path and the same ``--gyro``/``--model``/``--unit``/``--dt`` options."""
+    real path and the same ``--config``/``--gyro``/``--model``/``--unit``/``--dt``
+    options (less those in ``skip``, e.g. ``model`` for the step after a fit, whose
+    model the ledger holds)."""
     import shlex
 
     parts = [invocation(), command, shlex.quote(str(args.run))]
-    for opt in ("gyro", "model", "unit", "dt"):
-        value = getattr(args, opt, None)
+    for opt in ("config", "gyro", "model", "unit", "dt"):
+        value = None if opt in skip else getattr(args, opt, None)
         if value is not None:
             parts += [f"--{opt}", shlex.quote(str(value))]
     return " ".join(parts)

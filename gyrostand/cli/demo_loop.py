@@ -10,8 +10,10 @@ engineer does with a run:
 3. ``gyrostand fit RUN --add TERM``: the effect added, the error before and after, a
    ledger step;
 4. ``gyrostand diagnose RUN`` again: the verdict on the new model;
-5. the model adopted: the daemon's next run (a new stand record) on it, with its online
-   LKF estimating the added effect bin by bin;
+5. ``gyrostand adopt RUN``: the model written into the session file (here its text is
+   edited and validated by adopt's own functions, the diff printed, the file left as it
+   is), and the daemon's next run (a new stand record) on it, with its online LKF
+   estimating the added effect bin by bin;
 6. the report of the first run, its ledger figure showing the error fall.
 
 Each step is the command's own code (the workbench's steps and renderers), printed as the
@@ -21,8 +23,10 @@ command prints it.
 from __future__ import annotations
 
 import dataclasses
+import shlex
 import threading
 import time
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any, TextIO
 
@@ -55,22 +59,30 @@ def with_hidden_effect(cfg: SessionConfig, term: str, params: dict[str, float]
         sim, gyros=MappingProxyType(gyros)))
 
 
-def adopted(cfg: SessionConfig, models: dict[str, tuple[str, ...]], seed: int
-            ) -> SessionConfig:
-    """``cfg`` with each gyro's model replaced by its adopted one (the identifiers that
-    cannot identify it left out, as the session loader leaves them out), and the stand's
-    next record (``seed``)."""
-    from ..core import registry
-    from ..core.model import Model
+def adopted_through_file(cfg: SessionConfig, models: dict[str, tuple[str, ...]],
+                         stream: TextIO) -> SessionConfig:
+    """``cfg`` as ``gyrostand adopt`` leaves it: the session file's text edited by adopt's
+    own functions (:func:`gyrostand.cli.adopt.plan`, :func:`gyrostand.config.edit.edit_models`;
+    the diff printed) and validated from that text, its gyros taken; the file itself is
+    not written (the demo's session file stays as it is). The stand's next record: the
+    simulator's next seed."""
+    import difflib
 
-    gyros = []
-    for g in cfg.gyros:
-        names = tuple(n for n in models.get(g.name, g.model) if n != "white")
-        m = Model.parse(list(names))
-        idents = tuple(i for i in g.identifiers if registry.get(i).refusal(m) is None)
-        gyros.append(dataclasses.replace(g, model=names, identifiers=idents))
-    return dataclasses.replace(cfg, gyros=tuple(gyros), simulate=dataclasses.replace(
-        simulate_section(cfg), seed=seed))
+    from ..config import parse_text
+    from ..config.edit import edit_models
+    from .adopt import plan
+
+    path = Path(cfg.path)
+    text = path.read_text(encoding="utf-8")
+    new_models, new_ids, notes = plan(text, models, str(path))
+    edited = edit_models(text, new_models, new_ids, str(path))
+    diff = difflib.unified_diff(text.splitlines(keepends=True),
+                                edited.splitlines(keepends=True), fromfile=str(path),
+                                tofile=f"{path} (adopted; the demo does not write it)")
+    print("".join(diff) + "".join(f"note: {n}\n" for n in notes), file=stream, flush=True)
+    edited_cfg = parse_text(edited, path)  # as adopt validates the file it wrote
+    return dataclasses.replace(cfg, gyros=edited_cfg.gyros, simulate=dataclasses.replace(
+        simulate_section(cfg), seed=simulate_section(cfg).seed + 1))
 
 
 def daemon_run(cfg: SessionConfig, out: str | None, stream: TextIO, label: str) -> Any:
@@ -110,6 +122,7 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     from ..report.views import DiagnosisView, FitStepView
     from ..session.offline import truth_params
     from ..workbench import open_subject, run_diagnose, run_fit
+    from ..workbench.advice import adopt_command
     from .common import emit, invocation
 
     prog = invocation()
@@ -119,8 +132,8 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     print(f"demo: the stand's gyro has one physical effect more than the session's model "
           f"({models}); the workbench finds it (the truth is named at the end)",
           file=stream, flush=True)
-    step_header(1, "the daemon's run on the session's model", "gyrostand run SESSION",
-                stream)
+    step_header(1, "the daemon's run on the session's model",
+                f"{prog} run {shlex.quote(str(cfg.path))}", stream)
     first = daemon_run(hidden, out, stream, "run 1")
     print_outcome(first, stream, truth_params(cfg))
     if not first.ok:
@@ -148,7 +161,9 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
         step_header(4, "the verdict on the new model", f"{prog} diagnose {run_dir}", stream)
         after = run_diagnose(subject)
         emit(DiagnosisView(after, f"{subject.samples.source} (gyro {g.name})",
-                           subject.ledger_path, fit_command=fit), "text", stream)
+                           subject.ledger_path, fit_command=fit,
+                           adopt_command=adopt_command(subject) if after.adequate else None),
+             "text", stream)
         found[g.name] = subject.model.names
         ok = ok and after.adequate and add == term
         err0, err1 = step.before_error, step.after_error
@@ -157,11 +172,9 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
                   f"{subject.unit} ({100 * (1 - err1.rms / err0.rms):.0f} % less) with "
                   f"{add}", file=stream)
     step_header(5, "the adopted model on the daemon's next run (its online LKF included)",
-                "gyrostand run SESSION   # with model: "
-                + "; ".join(f"{k}: [{', '.join(n for n in v if n != 'white')}]"
-                            for k, v in found.items())
-                + " (the demo hands it to the daemon in memory)", stream)
-    nxt = adopted(hidden, found, seed=simulate_section(hidden).seed + 1)
+                f"{prog} adopt {shlex.quote(str(run_dir))}   "
+                f"# then: {prog} run {shlex.quote(str(cfg.path))}", stream)
+    nxt = adopted_through_file(hidden, found, stream)
     second = daemon_run(nxt, out, stream, "run 2")
     print_outcome(second, stream, truth_params(hidden))
     step_header(6, "the report: model vs measurements, the ledger", f"{prog} report {run_dir}",

@@ -26,6 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import progress
     from ..report.views import AllanView, DiagnosisView
     from ..workbench import run_diagnose
+    from ..workbench.advice import adopt_command
 
     if len(args.run) > 1:
         from ..workbench.joint import run_joint_diagnose
@@ -38,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     with progress.stage("diagnose", "Allan tables"):
         allan = AllanView.of_diagnosis(subject, rep)
     emit(DiagnosisView(rep, f"{subject.samples.source} (gyro {subject.gyro})",
-                       subject.ledger_path, allan, workbench_command(args, "fit")),
+                       subject.ledger_path, allan, workbench_command(args, "fit"),
+                       adopt_command(subject) if rep.adequate else None),
          args.format)
     return 0
 

@@ -6,11 +6,11 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 from ..plugins import available_terms
-from .common import add_format_args, emit
+from .common import add_format_args, emit, workbench_command
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
-    from ..workbench import FitStep
+    from ..workbench import FitStep, Subject
 
 
 def add_parser(sub: Any) -> None:
@@ -40,8 +40,31 @@ def run(args: argparse.Namespace) -> int:
     args.run = args.run[0]
     subject = subject_of(args)
     step = run_fit(subject, args.add, args.remove)
-    emit(FitStepView(step, subject.ledger_path), args.format)
+    emit(FitStepView(step, subject.ledger_path, next_lines(args, subject, step)),
+         args.format)
     return 0
+
+
+def next_lines(args: argparse.Namespace, subject: Subject, step: FitStep) -> tuple[str, ...]:
+    """The step after a fit, as lines to paste: ``adopt`` once the new model's verdict is
+    ADEQUATE (a diagnose of it in the ledger said so) and its run's session file does not
+    hold it yet; else ``diagnose`` for the verdict, naming the adopt to follow."""
+    import dataclasses
+
+    from ..workbench import read_ledger
+    from ..workbench.advice import adopt_command
+
+    model = step.after.model
+    adopt = adopt_command(dataclasses.replace(subject, model=model))
+    judged = [e for e in read_ledger(subject.ledger_path)
+              if e.get("gyro") == subject.gyro and e.get("action") == "diagnose"
+              and set(e.get("model", ())) == set(model.names)]
+    if adopt is not None and judged and judged[-1].get("adequate"):
+        return (f"next: {adopt}", "      (this model was judged ADEQUATE: adopt writes it "
+                "into the run's session file; the daemon uses it from its next run)")
+    then = (f"; once ADEQUATE: {adopt}" if adopt is not None else "")
+    return (f"next: {workbench_command(args, 'diagnose', skip=('model',))}",
+            f"      (the verdict on the new model{then})")
 
 
 def render(step: FitStep) -> str:

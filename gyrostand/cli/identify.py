@@ -1,5 +1,7 @@
-"""``gyrostand identify SAMPLES.csv --method {lsq,lkf,ml} [--model ...] [--sigma S]
-[--unit U] [--dt S] [--format text|json|html] [--variant relin|paper]``."""
+"""``gyrostand identify RUN|CSV|PARQUET|LOG [--config SESSION.yaml] --method {lsq,lkf,ml}
+[--model ...] [--sigma S] [--unit U] [--dt S] [--format text|json|html]
+[--variant relin|paper]``: the inputs of every workbench command
+(:mod:`gyrostand.workbench.inputs`)."""
 
 from __future__ import annotations
 
@@ -12,35 +14,30 @@ from ..core.names import LKF_VARIANTS, METHODS
 from ..errors import ConfigError
 from ..plugins import available_terms
 from .common import add_format_args, emit, number
+from .workbench_args import add_subject_args, subject_of, subjects_of
 
+#: the model of a CSV or Parquet input when --model is not given
 DEFAULT_MODEL = "markov,temp,bias"
 
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "identify",
-        help="identify drift-model parameters from a CSV of 1-s samples",
-        description="Identify the drift model from a CSV with columns t (s), drift, temp.",
+        help="identify drift-model parameters of a run (or a CSV, a Parquet export, a raw "
+             "log)",
+        description="Identify the drift model of a gyro's 1-s samples: from a run folder, "
+                    "a CSV with columns t (s), drift, temp, the Parquet export or a raw CAN "
+                    "log with --config.",
     )
-    p.add_argument("samples", nargs="+",
-                   help="CSV with a header containing t, drift, temp; several CSVs of runs of "
-                        "the same gyro are identified jointly (ml: shared physics, each run "
-                        "its own bias and warm-up; adds the turn-on bias repeatability)")
+    add_subject_args(p, several=True, model_help=(
+        f"comma-separated model terms of: {', '.join(available_terms())}; 'white' "
+        "measurement noise is always included (default: the run's current model; for a "
+        f"CSV or Parquet file {DEFAULT_MODEL})"))
     p.add_argument("--method", choices=sorted(METHODS), default="ml",
                    help="identifier: lsq (the paper's least squares), lkf (its linearized "
                         "Kalman filter), ml (exact maximum likelihood; default)")
-    p.add_argument("--model", default=DEFAULT_MODEL,
-                   help=f"comma-separated model terms (default {DEFAULT_MODEL}) of: "
-                        f"{', '.join(available_terms())}; 'white' measurement noise is always "
-                        "included")
     p.add_argument("--sigma", type=number(positive=True), default=None,
                    help="known stationary drift std σ (markov.sigma, > 0), as in the paper")
-    p.add_argument("--unit", default=None,
-                   help="the drift's unit (e.g. deg/h), shown in the table and the JSON "
-                        "'unit' (default: 'y')")
-    p.add_argument("--dt", type=number(positive=True), default=None,
-                   help="the CSV's sampling step in s (default: its most common step; "
-                        "missing rows are gaps)")
     add_format_args(p)
     g = p.add_argument_group("lsq options")
     g.add_argument("--regressor", choices=("previous", "current"), default="previous",
@@ -68,27 +65,26 @@ def options_for(args: argparse.Namespace) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.data import Samples
-    from ..core.model import Model
-
-    model = Model.parse(args.model)
-    if len(args.samples) > 1:
+    if len(args.run) > 1:
         from ..core.ml.joint import joint_ml
 
         if args.method != "ml":
             raise ConfigError(f"several runs are identified jointly by ml only (--method "
                               f"{args.method} fits one run)")
-        runs = [Samples.read_csv(path, dt=args.dt) for path in args.samples]
-        emit(joint_ml(runs, model, sigma=args.sigma), args.format)
+        subjects = subjects_of(args)
+        emit(joint_ml([s.samples for s in subjects], subjects[0].model, sigma=args.sigma),
+             args.format)
         return 0
-    samples = Samples.read_csv(args.samples[0], dt=args.dt)
+    args.run = args.run[0]
+    subject = subject_of(args)
+    samples = subject.samples
     opts = options_for(args)
     beta0 = getattr(opts, "beta0", None)  # a linearisation point (lkf)
     if beta0 is not None and beta0 * samples.dt >= 1.0:
         raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
-                          f"{1.0 / samples.dt:g} of {args.samples[0]}")
-    result = registry.get(args.method).fit(samples, model, opts)
-    if args.unit:
-        result = dataclasses.replace(result, unit=args.unit)
+                          f"{1.0 / samples.dt:g} of {args.run}")
+    result = registry.get(args.method).fit(samples, subject.model, opts)
+    if subject.unit != result.unit:
+        result = dataclasses.replace(result, unit=subject.unit)
     emit(result, args.format)
     return 0

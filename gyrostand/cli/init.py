@@ -43,8 +43,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..advice import command_line
     from ..config import load_config
-    from ..session.scaffold import scaffold, write_scaffold
+    from ..session.scaffold import scaffold, try_it_command, write_scaffold
 
     bus = bus_overrides(args)
     if bus and "interface" not in bus:
@@ -56,10 +57,12 @@ def run(args: argparse.Namespace) -> int:
                   listen_only=args.listen_only)
     print(render_survey(sc.survey, Path(args.dbc).name))
     paths = write_scaffold(sc, out, force=args.force)
-    load_config(out)  # what init writes, run --check accepts
+    cfg = load_config(out)  # what init writes, run --check accepts
     for p in paths:
         print(f"wrote {p}")
-    print(f"check it, then: gyrostand run {out} --check")
+    print(f"check it, then: {command_line('run', out, '--check')}")
+    print(f"try it without the stand (its simulate: section): "
+          f"{try_it_command(out, cfg.bus)}")
     return 0
 
 

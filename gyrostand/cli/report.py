@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import add_format_args
+from .common import add_format_args, workbench_command
 from .workbench_args import add_subject_args, subject_of, subjects_of
 
 
@@ -36,5 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from ..report import write_report  # matplotlib only when a report is asked for
 
     print(write_report(subject_of(args), args.out, format=args.format,
-                       single_file=args.single_file))
+                       single_file=args.single_file,
+                       fit_command=workbench_command(args, "fit"),
+                       diagnose_command=workbench_command(args, "diagnose")))
     return 0

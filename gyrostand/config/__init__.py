@@ -28,7 +28,7 @@ in the DBC at load, including signals under a multiplexer. Shape (``simulate`` a
 
 from __future__ import annotations
 
-from .parser import decode_text, load_config, parse_config
+from .parser import decode_text, load_config, parse_config, parse_text
 from .schema import (
     ACK_SIGNALS,
     COMMAND_SIGNALS,
@@ -84,4 +84,5 @@ __all__ = [
     "decode_text",
     "load_config",
     "parse_config",
+    "parse_text",
 ]

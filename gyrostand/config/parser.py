@@ -42,7 +42,14 @@ def load_config(path: str | Path) -> SessionConfig:
         raw = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
-    text = decode_text(raw, path)
+    return parse_text(decode_text(raw, path), path)
+
+
+def parse_text(text: str, path: str | Path) -> SessionConfig:
+    """Validate a session file's text as if read from ``path`` (its relative paths
+    resolve against ``path``'s folder), e.g. an edit before it is written. Raises
+    :class:`ConfigError`."""
+    path = Path(path)
     try:
         data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:

@@ -91,7 +91,7 @@ def fit_table(r: Tabulated) -> str:
     sample counts, the data's source, one row per parameter (value, standard deviation or
     ``fixed``, unit), the log-likelihood where the method has one, the residual RMS and
     the fit's warnings. Units are in the drift's unit when ``r.unit`` names it, else in
-    ``y`` with a line saying so."""
+    ``y`` with a line saying so; one notation either way (:func:`unit_text`)."""
     lines = [
         f"method {r.method}   model {','.join(r.model.names)}   "
         f"samples {r.n_observed}/{r.n_samples} (dt {r.dt:g} s)",
@@ -102,7 +102,7 @@ def fit_table(r: Tabulated) -> str:
     named = r.unit != DRIFT_UNIT  # the drift's unit given (identify --unit)
     for k, e in r.parameters.items():
         std = "fixed" if e.fixed else f"{e.std:12.4g}"
-        unit = unit_text(e.unit, r.unit) if named else UNIT_TEXT.get(e.unit, e.unit)
+        unit = unit_text(e.unit, r.unit)  # one notation, named or not
         lines.append(f"{k:<16} {e.value:14.6g} {std:>12}  {unit}")
     lines.append("")
     if r.loglik is not None:

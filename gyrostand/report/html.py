@@ -104,9 +104,11 @@ def _estimate(value: float, std: float, unit: str, fixed: bool, drift: str) -> s
 
 # ---- a diagnosis: shared by the diagnose page and the report ------------------------------
 
-def verdict(rep: Report, fit_command: str = FIT_RUN) -> str:
-    """The verdict, its reasons, and the next step when a candidate is significant
-    (``fit_command --add TERM``)."""
+def verdict(rep: Report, fit_command: str = FIT_RUN, adopt_command: str | None = None
+            ) -> str:
+    """The verdict, its reasons, and the next step: ``fit_command --add TERM`` when a
+    candidate is significant, ``adopt_command`` when the model is ADEQUATE (and its run's
+    session file lacks it)."""
     cls, word = ("ok", "ADEQUATE") if rep.adequate else ("bad", "NOT ADEQUATE")
     out = [f'<p><span class="verdict {cls}">{word}</span></p>']
     if rep.reasons:
@@ -119,6 +121,9 @@ def verdict(rep: Report, fit_command: str = FIT_RUN) -> str:
         best = rep.significant[0]
         out.append(f"<p>Next step: <code>{e(fit_command)} --add {e(best.term)}</code> "
                    f"(residual RMS {num(rep.diagnosis.rms)} → {num(best.rms_after)}).</p>")
+    elif rep.adequate and adopt_command:
+        out.append(f"<p>Next step: <code>{e(adopt_command)}</code> (writes this model into "
+                   "the run's session file; the daemon uses it from its next run).</p>")
     return "\n".join(out)
 
 
@@ -200,7 +205,8 @@ def diagnosis(view: DiagnosisView) -> str:
     model = ",".join(rep.model.names)
     return page(f"gyrostand diagnosis: {model}", fill(
         "diagnosis.html", model=e(model), source=e(view.source), unit=e(rep.unit),
-        verdict=verdict(rep, view.fit_command), parameters=parameters(rep),
+        verdict=verdict(rep, view.fit_command, view.adopt_command),
+        parameters=parameters(rep),
         model_error=model_error(rep), segments=segments(rep), candidates=candidates(rep), allan=allan_block(view.allan),
         warnings=warnings(rep.fit.warnings)))
 
@@ -227,10 +233,11 @@ def report_page(view: ReportPage) -> str:
                        [_ledger_row(st) for st in view.steps], left=5)
     else:
         ledger = (f"<p>The ledger <code>{e(subject.ledger_path.name)}</code> has no steps "
-                  "yet: <code>gyrostand diagnose RUN</code> and <code>gyrostand fit RUN "
-                  "--add TERM</code> record them.</p>")
+                  f"yet: <code>{e(view.diagnose_command)}</code> and "
+                  f"<code>{e(view.fit_command)} --add TERM</code> record them.</p>")
     body = fill("report.html", gyro=e(subject.gyro), meta=meta,
-                verdict=verdict(rep) + "\n" + model_error(rep),
+                verdict=verdict(rep, view.fit_command, view.adopt_command) + "\n"
+                + model_error(rep),
                 parameters=parameters(rep), segments=segments(rep),
                 candidates=candidates(rep), ledger=ledger, allan=allan_block(view.allan),
                 warnings=warnings(rep.fit.warnings),

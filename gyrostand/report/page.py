@@ -33,6 +33,7 @@ from ..core.diagnose.results import Report
 from ..core.model import context
 from ..runfolder import write_atomic
 from ..workbench import Subject, run_diagnose
+from ..workbench.advice import adopt_command, subject_command
 from . import figures, render
 from .series import convergence, ledger_points, ledger_steps
 from .views import AllanView, Plot, ReportPage
@@ -54,7 +55,8 @@ DOCUMENTS = {"text": "report.txt", "json": "report.json"}
 
 def write_report(subject: Subject, out_dir: str | Path | None = None, *,
                  report: Report | None = None, format: str = "html",
-                 single_file: bool = False) -> Path:
+                 single_file: bool = False, fit_command: str | None = None,
+                 diagnose_command: str | None = None) -> Path:
     """Write the report of ``subject``'s current model; return the path of the HTML page
     (or, with ``format`` ``"text"`` or ``"json"``, of the diagnosis as ``report.txt`` or
     ``report.json``, without figures).
@@ -66,6 +68,11 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
             writing a ledger step: a report only reads the ledger).
         format: ``"html"`` (default), ``"text"`` or ``"json"``.
         single_file: the HTML page with its figures embedded (no PNG files beside it).
+        fit_command: the page's ``fit`` step as the user can paste it (default: on the
+            data ``subject`` was opened from,
+            :func:`~gyrostand.workbench.advice.subject_command`); ``adopt`` is named once
+            the model is ADEQUATE and its run's session file lacks it.
+        diagnose_command: the page's ``diagnose`` step likewise.
     """
     if format != "html" and format not in DOCUMENTS:
         raise ValueError(f"unknown report format {format!r}")
@@ -76,9 +83,12 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     with progress.stage("report", "Allan tables"):
         allan = AllanView.of_diagnosis(subject, rep)
     now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    fit = fit_command or subject_command(subject, "fit")
+    diag = diagnose_command or subject_command(subject, "diagnose")
+    adopt = adopt_command(subject) if rep.adequate else None
     if format != "html":
         doc = render(ReportPage(subject, rep, (), ledger_steps(subject), "", now,
-                                __version__, allan), format)
+                                __version__, allan, fit, diag, adopt), format)
         path = out / DOCUMENTS[format]
         write_atomic(path, doc, sync=True)
         return path
@@ -152,7 +162,7 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     ]
     drawn = draw_plots(plots, out, single_file)
     page = render(ReportPage(subject, rep, drawn, steps, conv_source, now, __version__,
-                             allan), "html")
+                             allan, fit, diag, adopt), "html")
     path = out / PAGE
     write_atomic(path, page, sync=True)
     log.info("report written to %s", path)

@@ -46,10 +46,12 @@ def fit_result(r: FitResult) -> str:
 
 # ---- diagnose ----------------------------------------------------------------------------
 
-def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
+def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN,
+              adopt_command: str | None = None) -> str:
     """The verdict, model error, parameters, residual statistics, per-segment table and the
     ranked candidates of one diagnosis of the data ``source``; the next step, when a
-    candidate is significant, is ``fit_command --add TERM``."""
+    candidate is significant, is ``fit_command --add TERM``; when the model is ADEQUATE
+    and a run's session file does not hold it yet, ``adopt_command``."""
     d = rep.diagnosis
     u = rep.unit
     lines = [f"model    {','.join(rep.model.names)}", f"data     {source}",
@@ -114,6 +116,11 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN) -> str:
         lines.append("")
         lines.append("next: write a plugin term of the shape the reference shows (README: "
                      "plugins), then fit --add it")
+    elif rep.adequate and adopt_command:
+        lines.append("")
+        lines.append(f"next: {adopt_command}")
+        lines.append("      (writes this model into the run's session file; the daemon uses it "
+                     "from its next run)")
     for w in rep.fit.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
@@ -209,6 +216,8 @@ def fit_step(view: FitStepView) -> str:
                      f"({eb.rms:.4g} → {ea.rms:.4g} {ea.unit})")
     for w in a.warnings:
         lines.append(f"warning: {w}")
+    if view.next:
+        lines += ["", *view.next]
     return "\n".join(lines)
 
 
@@ -396,8 +405,8 @@ def run_report(view: RunReport) -> str:
 def _report_page(page: ReportPage) -> str:
     """The report's diagnosis as text (``report --format text``), its Allan tables after."""
     s = page.subject
-    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})") + _allan_block(
-        page.allan)
+    return diagnosis(page.report, f"{s.samples.source} (gyro {s.gyro})", page.fit_command,
+                     page.adopt_command) + _allan_block(page.allan)
 
 
 def _allan_block(view: AllanView | None) -> str:
@@ -479,7 +488,8 @@ KINDS: dict[type, Callable[[Any], str]] = {
     FitResult: fit_result,
     JointFit: joint_fit,
     JointDiagnosis: joint_diagnosis,
-    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source, v.fit_command)
+    DiagnosisView: lambda v: _with_ledger(diagnosis(v.report, v.source, v.fit_command,
+                                                    v.adopt_command)
                                           + _allan_block(v.allan), v),
     FitStepView: lambda v: _with_ledger(fit_step(v), v),
     AllanView: allan,

@@ -88,6 +88,8 @@ class DiagnosisView:
     allan: AllanView | None = None
     #: the ``fit`` command of this data as the user can paste it (the next step)
     fit_command: str = FIT_RUN
+    #: the ``adopt`` command of the run (the next step once ADEQUATE), when it has one
+    adopt_command: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return _with_allan(self.report.to_dict(), self.allan)
@@ -99,6 +101,8 @@ class FitStepView:
 
     step: FitStep
     ledger: Path | None = None
+    #: the lines that say the next step (``next: COMMAND`` and its note), text only
+    next: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return self.step.to_dict()
@@ -210,6 +214,11 @@ class ReportPage:
     written: str
     version: str
     allan: AllanView | None = None
+    #: the next steps as lines to paste (:mod:`gyrostand.workbench.advice`): ``fit`` and
+    #: ``diagnose`` on this data, ``adopt`` of its run once ADEQUATE (None: no run)
+    fit_command: str = FIT_RUN
+    diagnose_command: str = "gyrostand diagnose RUN"
+    adopt_command: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return _with_allan(self.report.to_dict(), self.allan)

@@ -15,7 +15,8 @@ Both carry the same data as the CSVs, values unchanged (float64; counts as integ
 
 Units: the drift's and temperature's from the run's session file (the DBC signals) when it
 can still be read, else ``y`` and ``degC``; a parameter's unit from the model (``y``
-replaced by the drift's unit).
+replaced by the drift's unit, in the notation the commands print:
+:func:`~gyrostand.core.summary.unit_text`, e.g. ``(deg/h)/(s·°C)``).
 
 pyarrow and asammdf are optional (``pip install 'gyrostand[formats]'``): a missing one is a
 clear error naming the extra.
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..can.bus import STATUS_CODES
 from ..core.model import Model
-from ..core.summary import UNIT_TEXT
+from ..core.summary import unit_text
 from ..errors import DataError, GyrostandError, OutputError
 from ..runfolder import (
     SAMPLES_COLUMNS,
@@ -79,9 +80,7 @@ def _units(run_dir: Path, info: dict[str, Any], gyro: str) -> tuple[str, str]:
 def _param_unit(model: Model | None, param: str, drift_unit: str) -> str:
     if model is None or param not in model.param_names:
         return ""
-    u = UNIT_TEXT.get(model.unit(param), model.unit(param))
-    return drift_unit if u == "y" else u.replace("y/", f"{drift_unit}/").replace(
-        "y·", f"{drift_unit}·")
+    return unit_text(model.unit(param), drift_unit)  # as every command prints it
 
 
 def read_run_tables(run_dir: str | Path, gyros: Sequence[str] | None = None

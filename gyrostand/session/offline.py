@@ -26,15 +26,16 @@ from ..can.logs.read import LogDamage, read_log
 from ..can.replay import replay
 from ..can.routes import ChannelMap
 from ..config import SessionConfig
+from ..core.data import Samples
 from ..core.model import Model
 from ..core.profiles import TemperatureProfile
 from ..core.simulation import simulate
-from ..errors import ConfigError, GyrostandError
+from ..errors import ConfigError, DataError, GyrostandError
 from ..runfolder import RunLog, make_run_dir, write_atomic
 from ..runfolder.layout import RESULT
-from .pipeline import NullSink, Pipeline, RunOutcome
+from .pipeline import NullSink, Pipeline, RunOutcome, session_ingest
 
-__all__ = ["run_replay", "run_replays", "split_runs", "log_span", "simulated_truths",
+__all__ = ["run_replay", "run_replays", "log_samples", "split_runs", "log_span", "simulated_truths",
            "simulated_frames", "truth_params"]
 
 log = logging.getLogger(__name__)
@@ -82,6 +83,50 @@ def run_replay(cfg: SessionConfig,
         raise
     finally:
         runlog.close()
+
+
+def log_samples(cfg: SessionConfig, log_path: str | Path | Sequence[str | Path]
+                ) -> dict[str, Samples]:
+    """Each gyro's 1-s samples of a raw log (or of several read one after the other),
+    decoded through ``cfg``'s DBC mapping and binned by the receive path a replay uses
+    (:func:`~gyrostand.session.pipeline.session_ingest`, :func:`~gyrostand.can.replay.replay`):
+    the values a replay writes to ``<gyro>/samples.csv`` (which stores each float's
+    ``repr``), with ``t`` from the gyro's first bin as the workbench reads a run folder.
+    Nothing is written. A :class:`DataError` naming the log when no frame decodes."""
+    paths = ([Path(log_path)] if isinstance(log_path, str | Path)
+             else [Path(p) for p in log_path])
+    what = " + ".join(str(p) for p in paths)
+    ingest = session_ingest(cfg)
+    rows: dict[str, list[tuple[float, float, float, int]]] = {g: [] for g in
+                                                              ingest.binner.gyros}
+    damage = LogDamage()
+    with progress.stage("read", "decode and bin", unit="bins") as bar:
+        for bins in replay(paths[0] if len(paths) == 1 else paths, ingest, damage=damage):
+            for b in bins:
+                rows[b.gyro].append((b.t, b.drift, b.temp, b.n_drift))
+            bar.update(len(bins))
+    if damage.total:
+        log.warning("%s: %d damaged part(s) of the log skipped", what, damage.total)
+    stats = ingest.listener.stats()
+    if not stats.decoded:
+        why = [f"{k} {v:,}" for k, v in stats.rejected.items() if v]
+        if stats.ignored:
+            why.insert(0, f"ignored {stats.ignored:,} (DBC messages no channel maps)")
+        raise DataError(f"{what}: decoded none of {stats.received:,} CAN frames through "
+                        f"the DBC mapping of {cfg.path}"
+                        + (f" ({', '.join(why)})" if why else "")
+                        + ": a log of another stand, or the wrong --config?")
+    out = {}
+    for g, r in rows.items():
+        if not r:
+            continue
+        a = np.array(r, dtype=float)
+        s = Samples.from_arrays(a[:, 0], a[:, 1], a[:, 2], dt=cfg.sampling.dt,
+                                source=what, counts=a[:, 3])
+        t = s.t - s.t[0]  # as a run folder is read (its epoch times stay in the file)
+        t.setflags(write=False)
+        out[g] = s.replace(t=t)
+    return out
 
 
 def log_span(path: str | Path) -> tuple[float, float] | None:

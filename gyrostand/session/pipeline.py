@@ -54,7 +54,8 @@ from .responses import BusSink, FrameSink, NullSink, Responses
 from .resume import ResumeState
 from .runend import RunOutcome, finish_run
 
-__all__ = ["Pipeline", "FrameSink", "NullSink", "BusSink", "RunOutcome", "TokenBucket"]
+__all__ = ["Pipeline", "session_ingest", "FrameSink", "NullSink", "BusSink", "RunOutcome",
+           "TokenBucket"]
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,20 @@ def _quantile(xs: Iterable[float], q: float) -> float:
     if not s:
         return math.nan
     return s[min(len(s) - 1, int(q * len(s)))]
+
+
+def session_ingest(cfg: SessionConfig, channels: ChannelMap | None = None) -> Ingest:
+    """The session's receive path: its DBC mapping's decoding listener and the 1-s binner,
+    as every run (live, replay) builds them; also what reads a raw log into samples for
+    the workbench (:func:`~gyrostand.session.offline.log_samples`), so a log gives the
+    bins its replay writes."""
+    channels = channels if channels is not None else ChannelMap.from_config(cfg)
+    listener = DecodingListener(cfg.db, channels, capacity=cfg.sampling.buffer,
+                                command=cfg.responses.command,
+                                max_gap=cfg.sampling.max_gap, dt=cfg.sampling.dt)
+    binner = Binner(channels.gyros, cfg.sampling.dt, cfg.sampling.epoch,
+                    cfg.sampling.max_gap)
+    return Ingest(listener, binner)
 
 
 class Pipeline:
@@ -94,12 +109,8 @@ class Pipeline:
         self.resume_state = resume
         self.segments = segments
         self.channels = ChannelMap.from_config(cfg)
-        self.listener = DecodingListener(cfg.db, self.channels, capacity=cfg.sampling.buffer,
-                                         command=cfg.responses.command,
-                                         max_gap=cfg.sampling.max_gap, dt=cfg.sampling.dt)
-        self.binner = Binner(self.channels.gyros, cfg.sampling.dt, cfg.sampling.epoch,
-                             cfg.sampling.max_gap)
-        self.ingest = Ingest(self.listener, self.binner)
+        self.ingest = session_ingest(cfg, self.channels)
+        self.listener, self.binner = self.ingest.listener, self.ingest.binner
         self.trackers = {g.name: GyroTracker(g, cfg.sampling.dt) for g in cfg.gyros}
         self.files = AckedFiles(run_dir, self.trackers, before_flush=before_flush,
                                 append=resume is not None, sync=sync)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gyrostand.advice import command_line
 from gyrostand.can.dbc import load_dbc, text_encoding
 from gyrostand.can.survey import (
     GyroProposal,
@@ -36,11 +37,13 @@ from gyrostand.can.survey import (
     daemon_frame_ids,
     dump_dbc,
     survey,
+    temperature_unit,
     with_daemon_frames,
 )
 from gyrostand.errors import ConfigError
 
-__all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus"]
+__all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus",
+           "try_it_command"]
 
 log = logging.getLogger(__name__)
 
@@ -176,7 +179,7 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
     L = [f"# gyrostand session for {dbc.name}, written by `gyrostand init` on {today}.",
          "# The mapping below was proposed from the DBC's units and names: check every",
          "# line, then validate without opening the bus:",
-         f"#     gyrostand run {out.name} --check",
+         f"#     {command_line('run', out.resolve(), '--check')}",
          "# Every key is explained in configs/demo.yaml of the gyrostand repository.", ""]
     for w in sv.warnings:
         L.append(f"# CHECK: {w}")
@@ -223,9 +226,64 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
     else:
         L += ["# responses: none (listen only): the daemon records, bins and identifies,",
               "# but sends no result/status frames and takes no commands."]
-    L += ["", "# To try this layout without the stand, add a simulate: section (see",
-          "# configs/demo.yaml) and run `gyrostand demo --config THIS.yaml`.", ""]
+    L += _simulate_lines(sv, db, try_it_command(out.resolve(), bus))
     return "\n".join(L)
+
+
+#: the simulated stand's temperature profile (t s, T degC): a warm-up, a soak, a cool-down
+_PROFILE_C = ((0, 20.0), (200, 45.0), (400, 45.0), (600, 35.0))
+
+
+def try_it_command(session: str | Path, bus: Mapping[str, Any]) -> str:
+    """The demo on ``session``'s simulated stand as a line to paste: ``gyrostand demo
+    --clean --config SESSION``, on python-can's virtual bus (with the simulator's frame
+    times kept) when the session's bus is another, so no simulated frame reaches a
+    stand's bus."""
+    extra: list[str] = []
+    if bus.get("interface") != "virtual" or not bus.get("preserve_timestamps"):
+        extra = ["-i", "virtual", "-c", "gyrostand-try", "--bus-kwargs",
+                 "preserve_timestamps=true"]
+    return command_line("demo", "--clean", "--config", session, *extra)
+
+
+def _simulate_lines(sv: Survey, db: Any, try_it: str) -> list[str]:
+    """A ``simulate:`` section for the demo (``run`` ignores it): the profile in the
+    temperature signal's unit, each gyro's truth scaled to its drift signal's range (σ a
+    two-thousandth of it, at least 20 steps of an integer signal), the thermal gain small
+    enough that the drift stays in range."""
+    tunit = temperature_unit(sv.gyros[0].temperature.unit) or "degC"
+    conv = {"K": lambda c: c + 273.15, "degF": lambda c: c * 9 / 5 + 32}.get(
+        tunit, lambda c: c)
+    profile = ", ".join(f"[{t}, {conv(c):g}]" for t, c in _PROFILE_C)
+    L = ["", "# A simulated stand of this layout, for trying it without the stand (`run`",
+         "# ignores this section; its truth is a guess scaled to the DBC's signals):",
+         f"#     {try_it}",
+         "simulate:",
+         "  seed: 1",
+         "  duration: 600                   # s of frame time",
+         f"  temperature: [{profile}]   # [t s, T {tunit}]",
+         "  rates: {drift: 10, temperature: 10}   # Hz",
+         "  gyros:"]
+    for g in sv.gyros:
+        sig = db.get_message_by_name(g.drift.message).get_signal_by_name(g.drift.signal)
+        span = (float(sig.maximum) - float(sig.minimum)
+                if sig.maximum is not None and sig.minimum is not None else 0.0)
+        step = 0.0 if sig.is_float else abs(float(sig.scale or 0))  # a float has no step
+        sigma = float(f"{max(span / 2000, 20 * step) or 0.1:.1g}")
+        gamma = float(f"{-(0.01 if tunit == 'degC' else 0.001) * sigma:.1g}")
+        L += [f"    {_yaml_str(g.name)}:",
+              "      model: [markov, temp, white]",
+              f"      params: {{markov.beta: 0.0333, markov.sigma: {_yaml_float(sigma)}, "
+              f"temp.gamma: {_yaml_float(gamma)}, white.sigma: 0.0}}"]
+    return L + [""]
+
+
+def _yaml_float(x: float) -> str:
+    """``x`` as a YAML 1.1 float (PyYAML reads ``1e-05`` as a string: its mantissa needs a
+    point, ``1.0e-05``)."""
+    r = repr(float(x))
+    mant, e, exp = r.partition("e")
+    return f"{mant}.0e{exp}" if e and "." not in mant else r
 
 
 def default_bus(session_name: str, channel: str = "can0"
@@ -239,9 +297,10 @@ def default_bus(session_name: str, channel: str = "can0"
     if socketcan_available(channel):
         return ({"interface": "socketcan", "channel": channel},
                 [f"SocketCAN's {channel} (found here); -i/-c/-b override it"])
-    return ({"interface": "virtual", "channel": session_name},
+    return ({"interface": "virtual", "channel": session_name, "preserve_timestamps": True},
             ["SocketCAN is absent here (no AF_CAN socket or no can0), so python-can's",
-             "virtual bus is written: the session runs, but no stand frame reaches it.",
+             "virtual bus is written (keeping a sender's frame times, as the demo's",
+             "simulated stand needs): the session runs, but no stand frame reaches it.",
              "On the stand write  interface: socketcan  and  channel: can0  (or pcan,",
              "vector, kvaser, ...), run with -i socketcan -c can0, or delete both keys",
              "and let python-can's config (~/.canrc, CAN_INTERFACE) name the bus."])

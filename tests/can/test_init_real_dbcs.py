@@ -113,7 +113,8 @@ def test_the_scaffold_writes_a_bus_that_exists_here(tmp_path, monkeypatch):
     if busconfig.socketcan_available("can0"):
         assert dict(cfg.bus) == {"interface": "socketcan", "channel": "can0"}
     else:  # SocketCAN absent: python-can's virtual bus, and how to switch
-        assert dict(cfg.bus) == {"interface": "virtual", "channel": "kp3_utf8"}
+        assert dict(cfg.bus) == {"interface": "virtual", "channel": "kp3_utf8",
+                                 "preserve_timestamps": True}  # the demo's frame times
         text = cfg.path.read_text(encoding="utf-8")
         assert "# SocketCAN is absent here (no AF_CAN socket or no can0)" in text
         assert "run with -i socketcan -c can0" in text

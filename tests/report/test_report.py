@@ -110,7 +110,8 @@ def test_page_has_verdict_tables_and_the_missing_effect_first(cli_report, chambe
     html = path.read_text(encoding="utf-8")
     text = " ".join(parse(path).text)
     assert "NOT ADEQUATE" in text
-    assert "gyrostand fit RUN --add temp_rate" in text
+    # the next step names the data as given and gyrostand as invoked (a line to paste)
+    assert f"-m gyrostand fit {chamber_csv} --add temp_rate" in text
     for name in ("markov.beta", "temp.gamma", "bias.b", "white.sigma", "markov.sigma"):
         assert f"<code>{name}</code>" in html
     assert "y/(s·°C)" in html

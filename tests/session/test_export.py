@@ -66,7 +66,7 @@ def test_parquet_round_trip(run_dir, tmp_path, capsys):
             assert _same(got.to_numpy(), np.asarray(v, dtype=float)), k
     eu = {f.name: f.metadata[b"unit"].decode() for f in est.schema}
     assert eu["lkf:markov.beta"] == eu["lkf:markov.beta:std"] == "1/s"
-    assert eu["lsq:temp.gamma"] == "deg/h/(s·°C)" and eu["lkf:markov.sigma"] == "deg/h"
+    assert eu["lsq:temp.gamma"] == "(deg/h)/(s·°C)" and eu["lkf:markov.sigma"] == "deg/h"
 
 
 def test_mf4_round_trip(run_dir, tmp_path, capsys):
@@ -95,7 +95,7 @@ def test_mf4_round_trip(run_dir, tmp_path, capsys):
             else:
                 assert np.array_equal(sig.samples, np.asarray(v), equal_nan=True), k
                 assert np.array_equal(sig.timestamps, np.asarray(cols["t"]) - t0)
-        assert mdf.get("az.lkf.temp.gamma").unit == "deg/h/(s·°C)"
+        assert mdf.get("az.lkf.temp.gamma").unit == "(deg/h)/(s·°C)"
         assert mdf.get("az.ml.markov.beta" if "ml:markov.beta" in cols
                        else "az.lkf.markov.beta.std").unit == "1/s"
 
