@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
 def render(tables: list[AllanTable], gyro: str, dt: float) -> str:
     """The tables as text (:func:`gyrostand.report.text.allan`)."""
-    from ..report.text import allan
+    from ..report.allan_text import allan
     from ..report.views import AllanView
 
     raw, resid = tables

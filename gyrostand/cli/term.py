@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .common import workbench_command
+from .workbench_args import INPUT_HELP
 
 
 def add_parser(sub: Any) -> None:
@@ -17,13 +18,14 @@ def add_parser(sub: Any) -> None:
     tsub = p.add_subparsers(dest="term_command", required=True)
     n = tsub.add_parser("new", help="a plugin term from a run's missing shape",
                         description=__doc__)
-    n.add_argument("--from", dest="run", required=True, metavar="RUN",
-                   help="a run folder, or a CSV with columns t, drift, temp")
+    n.add_argument("--from", dest="run", required=True, metavar="RUN", help=INPUT_HELP)
     n.add_argument("--name", default="shape", help="the term's name (default: shape)")
     n.add_argument("--out", default=None, metavar="DIR",
                    help="the package folder (default: gyrostand-<name>/ in the run folder, "
-                        "or beside the CSV)")
+                        "or beside the data file)")
     n.add_argument("--force", action="store_true", help="overwrite an existing module")
+    n.add_argument("--config", default=None, metavar="SESSION.yaml",
+                   help="the session file that decodes a raw CAN log (as for diagnose)")
     n.add_argument("--gyro", default=None, help="which gyro of a multi-gyro run")
     n.add_argument("--model", default=None,
                    help="the model whose missing shape to write (default: the run's "

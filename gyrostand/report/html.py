@@ -23,6 +23,7 @@ from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import unit_text
 from . import ByKind
+from . import allan_text as _allan
 from . import text as _text
 from .views import (
     FIT_RUN,
@@ -318,9 +319,9 @@ def _allan_slots(view: AllanView) -> dict[str, str]:
     meta = (f"{t0.n} samples at Δt = {view.dt:g} s of <code>{e(view.source)}</code>, "
             f"τ {t0.tau[0]:g}..{t0.tau[-1]:g} s; {t0.level:.0%} confidence intervals "
             f"(overlapping ADEV, EDF); IEEE Std 952 figures.")
-    rows = [[f"{e(t0.figures[n].symbol)} {e(_text.TITLES[n])}"]
-            + ["<br>".join(e(x) for x in _text.allan_figure(t, n)) for t in view.tables]
-            for n in _text.ORDER]
+    rows = [[f"{e(t0.figures[n].symbol)} {e(_allan.TITLES[n])}"]
+            + ["<br>".join(e(x) for x in _allan.allan_figure(t, n)) for t in view.tables]
+            for n in _allan.ORDER]
     return {"gyro": e(view.gyro), "meta": meta,
             "table": table(["figure", *[t.label for t in view.tables]], rows, left=3),
             "warnings": warnings([f"{t.label}: {w}" for t in view.tables

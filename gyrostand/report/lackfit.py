@@ -3,7 +3,8 @@ shape that is missing (:mod:`gyrostand.core.diagnose.reference`)."""
 
 from __future__ import annotations
 
-from ..core.diagnose.reference import REPORT_ALPHA, Reference, lack_of_fit_text
+from ..core.diagnose.reference import REPORT_ALPHA, Reference
+from ..core.diagnose.verdict import lack_of_fit_text
 
 __all__ = ["reference"]
 

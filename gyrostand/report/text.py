@@ -15,16 +15,16 @@ from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import fit_table, unit_text
 from . import ByKind
+from .allan_text import allan
 from .lackfit import reference
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
 
 if TYPE_CHECKING:
-    from ..core.diagnose.allan import AllanTable
     from ..core.diagnose.prederror import ModelError
     from ..core.diagnose.results import Report
     from .views import GyroFinals
 
-__all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step", "allan",
+__all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step",
            "result_table", "run_summary", "run_report", "estimate", "SAME_SIGMA", "joint_fit",
            "joint_diagnosis"]
 
@@ -114,8 +114,9 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN,
         lines.append(f"next: {fit_command} --add {best.term}")
     elif rep.reference is not None and rep.reference.significant and not rep.significant:
         lines.append("")
-        lines.append("next: write a plugin term of the shape the reference shows (README: "
-                     "plugins), then fit --add it")
+        lines.append(f"next: {term_new_command(fit_command)}")
+        lines.append("      (writes a plugin term of the shape the reference shows; review "
+                     "it, pip install it, then fit --add it: README, plugins)")
     elif rep.adequate and adopt_command:
         lines.append("")
         lines.append(f"next: {adopt_command}")
@@ -163,6 +164,12 @@ def _with_ledger(body: str, view: DiagnosisView | FitStepView) -> str:
 
 
 # ---- fit ---------------------------------------------------------------------------------
+
+def term_new_command(fit_command: str) -> str:
+    """``term new --from DATA …`` for the data of ``fit_command`` (``… fit DATA …``)."""
+    head, sep, tail = fit_command.partition(" fit ")
+    return f"{head} term new --from {tail}" if sep else "gyrostand term new --from RUN"
+
 
 def _test(name: str) -> str:
     """`` (the test)`` after an LR's df when it is not plain χ²(df)."""
@@ -219,63 +226,6 @@ def fit_step(view: FitStepView) -> str:
     if view.next:
         lines += ["", *view.next]
     return "\n".join(lines)
-
-
-# ---- allan -------------------------------------------------------------------------------
-
-#: conventional units of the figures for a drift in deg/h or deg/s: (unit, factor)
-CONVENTIONAL = {
-    "deg/h": {"angle_random_walk": ("deg/√h", 1 / 60), "rate_random_walk": ("deg/h/√h", 60.0)},
-    "deg/s": {"angle_random_walk": ("deg/√h", 60.0),
-              "rate_random_walk": ("deg/h/√h", 3600.0 * 60.0)},
-}
-ORDER = ("angle_random_walk", "bias_instability", "rate_random_walk", "rate_ramp")
-TITLES = {"angle_random_walk": "angle random walk", "bias_instability": "bias instability",
-          "rate_random_walk": "rate random walk", "rate_ramp": "rate ramp"}
-
-
-def allan_figure(table: AllanTable, name: str) -> list[str]:
-    """One figure of a table: value [lo, hi] unit at its τ, and in conventional units."""
-    f = table.figures[name]
-    if f.value == 0.0:
-        return ["not seen (its line fits as 0)"]
-    where = f"τ = {f.tau_read:g} s" if f.tau_read is not None else ""
-    lines = [f"{f.value:.4g} [{f.lo:.4g}, {f.hi:.4g}] {f.unit}" + (f", {where}" if where else "")]
-    conv = CONVENTIONAL.get(table.unit, {}).get(name)
-    if conv is not None:
-        u, k = conv
-        lines.append(f"= {f.value * k:.4g} [{f.lo * k:.4g}, {f.hi * k:.4g}] {u}")
-    return lines
-
-
-def allan(view: AllanView) -> str:
-    """The figures of each table side by side, with units and the reading τ."""
-    tables, gyro, dt = view.tables, view.gyro, view.dt
-    t0 = tables[0]
-    out = [f"Allan variance (IEEE Std 952 figures), gyro {gyro}: {t0.n} samples at "
-           f"Δt = {dt:g} s, τ {t0.tau[0]:g}..{t0.tau[-1]:g} s, "
-           f"{t0.level:.0%} confidence intervals (overlapping ADEV, EDF)", ""]
-    cells_of = {name: [allan_figure(t, name) for t in tables] for name in ORDER}
-    # a column as wide as its longest cell and 2 spaces (46 at least): cells never touch
-    width = max([46] + [len(x) + 2 for c in cells_of.values() for cell in c for x in cell])
-    out.append(f"{'':<22}" + "".join(f"{t.label:<{width}}" for t in tables))
-    for name in ORDER:
-        cells = cells_of[name]
-        sym = t0.figures[name].symbol
-        for row in range(max(len(c) for c in cells)):
-            head = f"{sym}  {TITLES[name]}" if row == 0 else ""
-            out.append(f"{head:<22}" + "".join(
-                f"{(c[row] if row < len(c) else ''):<{width}}" for c in cells).rstrip())
-    out.append("")
-    out.append("N: the τ^-1/2 line at τ = 1 s; B: the flat minimum / 0.664 at its τ; K: the "
-               "τ^+1/2 line at τ = 3 s;")
-    out.append("R: the τ^+1 line at τ = √2 s (a trend). Lines fitted jointly to σ²(τ); "
-               "intervals: χ² with the EDF")
-    out.append("of the τ where the term dominates (B: its minimum).")
-    for t in tables:
-        for w in t.warnings:
-            out.append(f"warning ({t.label}): {w}")
-    return "\n".join(out)
 
 
 # ---- the end of a run --------------------------------------------------------------------

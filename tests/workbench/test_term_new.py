@@ -89,3 +89,10 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
     assert "cubic_t" in d["model"]
     assert d["reference"]["significant"] is False, d["reference"]["p_value"]
     assert d["adequate"] is True, d["reasons"]
+
+
+def test_the_next_line_of_an_effect_outside_the_vocabulary_is_term_new():
+    from gyrostand.report.text import term_new_command
+
+    assert term_new_command("/v/bin/gyrostand fit '/runs/a b' --gyro az") == \
+        "/v/bin/gyrostand term new --from '/runs/a b' --gyro az"

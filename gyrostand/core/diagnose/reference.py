@@ -28,7 +28,6 @@ switch-on — which shows the shape that is missing (:class:`Partial`).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -490,21 +489,3 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
                      partial=partial, noise_model=noise_model, noise=noise, fit=fit,
                      lr_fixed=lr_fixed, noise_names=tuple(noise_names),
                      traded=traded, seconds=time.perf_counter() - t0)
-
-
-def lack_of_fit_text(ref: Reference) -> str:
-    """One line: the lack-of-fit test."""
-    p = ref.p_value
-    ps = f"{p:.2g}" if p >= 1e-300 else "< 1e-300"
-    return f"lack of fit against the saturated reference: LR {ref.lr:.1f} on {ref.df} df, p {ps}"
-
-
-def describe_missing(ref: Reference, unit: str) -> list[str]:
-    """Plain lines on what shape is missing: each significant group's peak effect."""
-    out = []
-    for q in ref.missing():
-        x, e, s = q.peak()
-        xs = f"{x:.3g} {q.unit}" if not math.isnan(x) else "?"
-        out.append(f"{q.group}: {e:+.3g} ± {s:.2g} {unit} at {q.variable} = {xs} "
-                   f"(Wald {q.wald:.1f} on {q.df} df)")
-    return out

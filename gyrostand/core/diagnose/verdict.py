@@ -18,6 +18,7 @@ T, of dT/dt and of time) and that a plugin term of that shape is the next step.
 
 from __future__ import annotations
 
+import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
@@ -41,11 +42,27 @@ from .prederror import ModelError, model_error
 from .reference import (
     REPORT_ALPHA,
     Reference,
-    describe_missing,
-    lack_of_fit_text,
     reference_fit,
 )
 from .results import Candidate, Report
+
+
+def lack_of_fit_text(ref: Reference) -> str:
+    """One line: the lack-of-fit test."""
+    p = ref.p_value
+    ps = f"{p:.2g}" if p >= 1e-300 else "< 1e-300"
+    return f"lack of fit against the saturated reference: LR {ref.lr:.1f} on {ref.df} df, p {ps}"
+
+
+def describe_missing(ref: Reference, unit: str) -> list[str]:
+    """Plain lines on what shape is missing: each significant group's peak effect."""
+    out = []
+    for q in ref.missing():
+        x, e, s = q.peak()
+        xs = f"{x:.3g} {q.unit}" if not math.isnan(x) else "?"
+        out.append(f"{q.group}: {e:+.3g} ± {s:.2g} {unit} at {q.variable} = {xs} "
+                   f"(Wald {q.wald:.1f} on {q.df} df)")
+    return out
 
 
 def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT,
