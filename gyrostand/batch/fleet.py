@@ -39,7 +39,8 @@ from typing import Any
 from ..runfolder import write_atomic
 from .table import columns
 
-__all__ = ["param_columns", "robust_z", "outliers", "spreads", "trends", "write_view",
+__all__ = ["param_columns", "robust_z", "outliers", "with_outliers", "spreads", "trends",
+           "write_view",
            "Z_LIMIT", "MIN_GROUP", "CONFIDENCE"]
 
 #: |robust z| above this is an outlier (Iglewicz & Hoaglin's 3.5)
@@ -106,6 +107,39 @@ def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                     flags.append({"run": r["run"], "gyro": r.get("gyro"), "type": typ,
                                   "parameter": p, "value": v, "z": z})
     return flags
+
+
+def with_outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` with the outlier flags in the table itself, where people filter (fleet.csv,
+    fleet.parquet): ``outliers`` (``parameter z=…`` of each flagged parameter, ``; ``
+    between) and ``max_abs_z`` (the largest |robust z| of the row's parameters; empty where
+    no group is large enough to judge). The flags are :func:`outliers`'s."""
+    flags: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
+    for f in outliers(rows):
+        flags.setdefault((f["run"], f["gyro"]), []).append(f)
+    zmax: dict[tuple[Any, Any], float] = {}
+    ok = [r for r in rows if r.get("status") == "ok"]
+    for p in param_columns(ok):
+        groups: dict[str, list[tuple[dict[str, Any], float]]] = {}
+        for r in ok:
+            v = _num(r.get(p))
+            if v is not None:
+                groups.setdefault(_type_of(r), []).append((r, v))
+        for members in groups.values():
+            zs = robust_z([v for _, v in members])
+            for (r, _), z in zip(members, zs or (), strict=False):
+                key = (r["run"], r.get("gyro"))
+                zmax[key] = max(zmax.get(key, 0.0), abs(z))
+    out = []
+    for r in rows:
+        key = (r["run"], r.get("gyro"))
+        extra: dict[str, Any] = {}
+        if key in zmax:
+            extra["max_abs_z"] = round(zmax[key], 3)
+            extra["outliers"] = "; ".join(f"{f['parameter']} z={f['z']:.2f}"
+                                          for f in flags.get(key, ()))
+        out.append({**r, **extra})
+    return out
 
 
 #: the confidence level of every interval of the fleet view

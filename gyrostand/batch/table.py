@@ -3,7 +3,9 @@
 Columns, in order (a column is left out when no row has it):
 
 * ``run``, then the manifest's attributes (``serial``, ``date``, ...), ``gyro``;
-* ``status`` (``ok``, ``failed``: the run or this gyro; ``missing``: not done yet) and
+* ``status`` (``ok``; ``damaged``: fitted, but the log had damaged containers, truncated
+  objects or skipped lines, ``log_damage`` of them; ``failed``: the run or this gyro;
+  ``missing``: not done yet) and
   ``error`` (what failed, for a failed row);
 * ``kind`` (``log`` / ``folder``), ``source`` (the input), ``config``;
 * ``frames``, ``decoded``, ``rejected``, ``log_damage`` (the run's decoder counts),
@@ -15,6 +17,9 @@ Columns, in order (a column is left out when no row has it):
 * ``top_candidate``, ``top_lr``, ``top_p``, ``top_delta_bic``, ``top_significant`` (the
   best-ranked missing effect and its likelihood-ratio statistic), ``significant`` (every
   significant one);
+* ``outliers`` (each parameter flagged by its robust z within the gyro type, ``name
+  z=…``) and ``max_abs_z`` (:func:`~.fleet.with_outliers`; empty where a type has too few
+  ok runs to judge);
 * per parameter ``<term>.<param>`` and ``<term>.<param>_std``;
 * ``warnings``, ``seconds`` (the task's wall time), ``run_dir``, ``report``.
 """
@@ -37,7 +42,8 @@ COLUMNS_HEAD = ("status", "error", "kind", "source", "config", "frames", "decode
                 "rejected", "log_damage", "bins", "gaps", "observed", "model", "method",
                 "loglik", "rms", "unit", "model_error", "model_error_floor", "verdict",
                 "reasons", "ljung_box_p", "top_candidate", "top_lr", "top_p",
-                "top_delta_bic", "top_significant", "significant")
+                "top_delta_bic", "top_significant", "significant", "outliers",
+                "max_abs_z")
 COLUMNS_TAIL = ("warnings", "seconds", "run_dir", "report")
 
 

@@ -253,13 +253,14 @@ def run_task(spec: RunSpec, opts: TaskOptions, out: str) -> dict[str, Any]:
         for gyro, ginfo in gyros.items():
             try:
                 row = _gyro_row(run_dir, gyro, ginfo, opts)
-                row["status"] = "ok"
+                # fitted, but on a log with damage: not "ok" where people filter
+                row["status"] = "damaged" if n_damage else "ok"
             except Exception as exc:  # noqa: BLE001 - the row says what failed
                 log.info("%s gyro %s failed: %s", spec.run, gyro, exc)
                 row = {"gyro": gyro, "status": "failed", "error": _error_text(exc),
                        "bins": ginfo.get("bins"), "gaps": ginfo.get("gaps")}
             rec["rows"].append(row)
-        oks = sum(r["status"] == "ok" for r in rec["rows"])
+        oks = sum(r["status"] in ("ok", "damaged") for r in rec["rows"])
         rec["status"] = "ok" if oks == len(rec["rows"]) else "partial" if oks else "failed"
         if not oks:
             rec["error"] = "; ".join(f"gyro {r['gyro']}: {r['error']}" for r in rec["rows"])

@@ -153,7 +153,9 @@ def run(args: argparse.Namespace) -> int:
 
             counts = run_batch(client, specs, opts, args.out, force=args.force,
                                retry_failed=args.retry_failed, on_progress=on_progress)
-    rows = fleet_rows(specs, args.out)
+    from ..batch.fleet import with_outliers
+
+    rows = with_outliers(fleet_rows(specs, args.out))
     paths = write_table(rows, args.out, attrs)
     if not args.no_view:
         from ..batch.fleet import write_view

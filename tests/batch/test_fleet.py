@@ -50,6 +50,36 @@ def test_robust_z_flags_the_planted_outlier_and_nothing_else():
     # the lone FOG-B run is in a group of its own, too small to judge: not flagged
 
 
+def test_the_outlier_flags_are_columns_of_fleet_csv_and_parquet(tmp_path):
+    """Where people filter (issue 27): the planted outlier's row has its flag and z in
+    fleet.csv and fleet.parquet; the lone run of another type has no z (too few to judge);
+    a damaged row is not judged."""
+    rows = _fleet(s_w=0.002, s_b=0.0005)
+    rows[17]["markov.beta"] += 0.05
+    rows.append({**rows[0], "run": "other-type", "type": "FOG-B", "markov.beta": 9.0})
+    rows.append({**rows[1], "run": "cut-log", "status": "damaged", "log_damage": 3})
+    table = fleet.with_outliers(rows)
+    flagged = [r for r in table if r.get("outliers")]
+    assert [r["run"] for r in flagged] == [rows[17]["run"]]
+    assert flagged[0]["outliers"].startswith("markov.beta z=") and flagged[0]["max_abs_z"] > 10
+    assert "max_abs_z" not in table[-2] and "max_abs_z" not in table[-1]
+    assert all(r["max_abs_z"] <= fleet.Z_LIMIT for r in table[:-2] if r is not flagged[0]
+               and r["run"] != rows[17]["run"])
+    paths = write_table(table, tmp_path, ["serial", "date", "type"])
+    import csv
+
+    with open(paths["csv"], newline="") as fh:
+        got = {r["run"]: r for r in csv.DictReader(fh)}
+    assert got[rows[17]["run"]]["outliers"].startswith("markov.beta z=")
+    assert got["cut-log"]["status"] == "damaged" and got["cut-log"]["max_abs_z"] == ""
+    if "parquet" in paths:
+        import pyarrow.parquet as pq
+
+        t = pq.read_table(paths["parquet"]).to_pydict()
+        i = t["run"].index(rows[17]["run"])
+        assert t["max_abs_z"][i] > 10 and t["outliers"][i].startswith("markov.beta")
+
+
 def test_trend_per_unit_is_the_planted_ageing():
     rows = _fleet(units=3, runs=12, s_w=1e-4, s_b=0.01, slope=0.006)
     tr = fleet.trends(rows)
