@@ -88,9 +88,11 @@ def robust_z(values: Sequence[float]) -> list[float] | None:
     return [0.6745 * (v - med) / mad for v in values]
 
 
-def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One entry per (row, parameter) flagged: run, gyro, type, parameter, value, z."""
-    flags = []
+def _scores(rows: Sequence[dict[str, Any]]
+            ) -> list[tuple[dict[str, Any], str, float, str, float]]:
+    """(row, parameter, value, gyro type, robust z) of every ok row's parameter whose
+    type has a group large enough to judge."""
+    out = []
     ok = [r for r in rows if r.get("status") == "ok"]
     for p in param_columns(ok):
         groups: dict[str, list[tuple[dict[str, Any], float]]] = {}
@@ -100,13 +102,15 @@ def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 groups.setdefault(_type_of(r), []).append((r, v))
         for typ, members in groups.items():
             zs = robust_z([v for _, v in members])
-            if zs is None:
-                continue
-            for (r, v), z in zip(members, zs, strict=True):
-                if abs(z) > Z_LIMIT:
-                    flags.append({"run": r["run"], "gyro": r.get("gyro"), "type": typ,
-                                  "parameter": p, "value": v, "z": z})
-    return flags
+            for (r, v), z in zip(members, zs or (), strict=False):
+                out.append((r, p, v, typ, z))
+    return out
+
+
+def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One entry per (row, parameter) flagged: run, gyro, type, parameter, value, z."""
+    return [{"run": r["run"], "gyro": r.get("gyro"), "type": typ, "parameter": p,
+             "value": v, "z": z} for r, p, v, typ, z in _scores(rows) if abs(z) > Z_LIMIT]
 
 
 def with_outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -118,18 +122,9 @@ def with_outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for f in outliers(rows):
         flags.setdefault((f["run"], f["gyro"]), []).append(f)
     zmax: dict[tuple[Any, Any], float] = {}
-    ok = [r for r in rows if r.get("status") == "ok"]
-    for p in param_columns(ok):
-        groups: dict[str, list[tuple[dict[str, Any], float]]] = {}
-        for r in ok:
-            v = _num(r.get(p))
-            if v is not None:
-                groups.setdefault(_type_of(r), []).append((r, v))
-        for members in groups.values():
-            zs = robust_z([v for _, v in members])
-            for (r, _), z in zip(members, zs or (), strict=False):
-                key = (r["run"], r.get("gyro"))
-                zmax[key] = max(zmax.get(key, 0.0), abs(z))
+    for r, _, _, _, z in _scores(rows):
+        key = (r["run"], r.get("gyro"))
+        zmax[key] = max(zmax.get(key, 0.0), abs(z))
     out = []
     for r in rows:
         key = (r["run"], r.get("gyro"))
