@@ -308,22 +308,17 @@ def _tangent(model: Model, p, samples: Samples, name: str, ctx: Context | None =
     return d / (2 * TANGENT_STEP)
 
 
-def _whitened(model: Model, p, samples: Samples, shapes: list[str]
+def _whitened(model: Model, p, samples: Samples, tangents: Mapping[str, np.ndarray]
               ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The regressors and the drift through the model's Kalman filter at ``p``, scaled by
     1/√f (observed rows), and the regressors' names: the GLS design. With a column per
-    held shape parameter (``tangent:<name>``): the derivative of the model's
-    deterministic part along it."""
-    ctx = context(samples, model)
-    X = model.regressors(p, ctx)
+    held shape parameter (``tangent:<name>``, ``tangents``' :func:`_tangent`): the
+    derivative of the model's deterministic part along it."""
+    X = model.regressors(p, context(samples, model))
     names = list(model.names_of_kind("linear"))
-    theta = np.array([p[n] for n in names])
-    tangents = []
-    for n in shapes:
-        tangents.append(_tangent(model, p, samples, n, ctx, theta))
     if tangents:
-        X = np.column_stack([X, *tangents])
-        names += [f"tangent:{n}" for n in shapes]
+        X = np.column_stack([X, *tangents.values()])
+        names += [f"tangent:{n}" for n in tangents]
     E, f = model.filter_columns(p, samples, X)
     ok = np.isfinite(E[:, 0]) & (f > 0)
     w = 1.0 / np.sqrt(f[ok])
@@ -436,7 +431,9 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     # a little off its optimum would otherwise count as lack of fit: hidden hysteresis,
     # its τ at the bound, LR averaged 15.2 on 12 df without the tangents)
     shapes = [n for n, q in model.params if q.kind != "linear" and n not in noise_names]
-    W, wy, names = _whitened(ref_model, p, samples, shapes)
+    # each held shape's tangent, once (the basis does not move with the model's shapes)
+    tangents = {n: _tangent(model, current.values, samples, n) for n in shapes}
+    W, wy, names = _whitened(ref_model, p, samples, tangents)
     own = [i for i, n in enumerate(names) if not n.startswith(NAME + ".")]
     rss_cur = float(np.sum((wy - W[:, own] @ np.linalg.lstsq(W[:, own], wy,
                                                               rcond=1e-12)[0]) ** 2))
@@ -450,8 +447,7 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     # the reference by exact ML, its random part free, the model's shapes held (free, with
     # the basis beside them, a hidden hysteresis added gave LR 29.4 on 12 df) and their
     # tangents as fixed columns; started at the current fit and the GLS basis
-    tan = {f"T_{n.replace('.', '_')}": _tangent(model, current.values, samples, n)
-           for n in shapes}
+    tan = {f"T_{n.replace('.', '_')}": v for n, v in tangents.items()}
     if tan:
         cols = basis.columns + tuple(Column(k, "tangent", "the model's tangent", False)
                                      for k in tan)
@@ -479,7 +475,7 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     # at the reference's 435 on 9), its Wald then referred as the LR is (/ FREE_LR_SCALE:
     # the basis trades with the random part's low frequencies)
     at = {**p, **({n: float(fit.values[n]) for n in noise_names} if traded else {})}
-    W, wy, names = _whitened(ref_model0, at, samples, shapes)
+    W, wy, names = _whitened(ref_model0, at, samples, tangents)
     theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
     at.update({n: float(v) for n, v in zip(names, theta, strict=True)
                if n.startswith(NAME + ".")})
