@@ -26,7 +26,8 @@ def subject_command(subject: Subject, command: str) -> str:
     """``gyrostand COMMAND DATA [--config C] [--gyro G] [--unit U]`` on the data
     ``subject`` was opened from (the run folder, the file), with what reopens it as it
     was: the raw log's session file, the gyro where the data holds several, a CSV's
-    unit named on the command line. Its model is the ledger's (no ``--model``)."""
+    unit named on the command line, and ``--model`` when the subject's model was named
+    (``report RUN --model …`` suggests a fit of that model, not of the ledger's)."""
     data = subject.run_dir or subject.path or Path(subject.samples.source)
     words: list[str | Path] = [command, data]
     if subject.origin == "log" and subject.config is not None:
@@ -36,6 +37,8 @@ def subject_command(subject: Subject, command: str) -> str:
         words += ["--gyro", subject.gyro]
     if subject.origin == "csv" and subject.unit != "y":
         words += ["--unit", subject.unit]
+    if subject.model_given:  # a model named on the command line, not the ledger's
+        words += ["--model", ",".join(subject.model.names)]
     return command_line(*words)
 
 

@@ -54,7 +54,7 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
     show as ``command``'s progress (:mod:`gyrostand.progress`, on in the CLI only)."""
     from .. import progress
 
-    with progress.stage(command, "ML fit of the current model"):
+    with progress.stage(command, f"ML fit of {','.join(subject.model.names)}"):
         fit = ml(subject.samples, subject.model)
     with progress.stage(command, "candidates, residual tests, model-error floor"):
         rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit)

@@ -40,6 +40,8 @@ class Subject:
     unit: str = DRIFT_UNIT  # the drift's unit (deg/h from our DBC)
     path: Path | None = None  # the input as it was named (a run folder, a file)
     config: Path | None = None  # the session file that decoded a raw log
+    #: the model was named (``--model``), not the ledger's current one: advice repeats it
+    model_given: bool = False
 
     @property
     def out_dir(self) -> Path:
@@ -67,7 +69,8 @@ def open_subject(path: str | Path, *, gyro: str | None = None,
                else current_model(src.ledger, src.gyro, src.configured))
     return Subject(samples=src.samples, model=current, gyro=src.gyro, ledger_path=src.ledger,
                    run_dir=src.run_dir, origin=src.origin, unit=unit or src.unit,
-                   path=Path(path), config=Path(config) if config is not None else None)
+                   path=Path(path), config=Path(config) if config is not None else None,
+                   model_given=model is not None)
 
 
 def open_subjects(paths: Sequence[str | Path], *, gyro: str | None = None,

@@ -125,3 +125,18 @@ def test_the_report_s_next_step_runs_as_pasted(tmp_path):
     r2 = subprocess.run(cmd + ["-q"], capture_output=True, text=True, timeout=300)
     assert r2.returncode == 0, r2.stderr
     assert "adding temp2 improves the fit" in r2.stdout
+
+
+def test_a_report_of_a_named_model_advises_on_that_model(tmp_path):
+    """``report RUN --model M`` speaks of M: its advice repeats ``--model M`` (the ledger's
+    model may already hold the effect it proposes)."""
+    from gyrostand.workbench.advice import subject_command
+    from gyrostand.workbench.subject import open_subject
+
+    csv = tmp_path / "run.csv"
+    simulate(Model.parse("markov,temp"), {"markov.beta": 0.0333, "markov.sigma": 0.1,
+                                          "temp.gamma": -0.001, "white.sigma": 0.0},
+             TemperatureProfile.from_breakpoints([[0, 20], [500, 45]]), seed=1).to_csv(csv)
+    named = open_subject(csv, model="markov,temp")
+    assert shlex.split(subject_command(named, "fit"))[-2:] == ["--model", "markov,temp,white"]
+    assert "--model" not in subject_command(open_subject(csv), "fit")
