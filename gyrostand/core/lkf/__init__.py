@@ -16,6 +16,7 @@ EXPORTS: dict[str, str] = {
     "relin_fit": "filter",
     "RelinLKF": "relin",
     "RelinSchedule": "schedule",
+    "band_warnings": "band",
 }
 __all__ = sorted(EXPORTS)
 __getattr__, __dir__ = exports(__name__, EXPORTS, globals())
