@@ -163,17 +163,29 @@ def ok_coverage(ats):
     return out
 
 
-def ok_summary(cov) -> tuple[str, bool]:
-    """The worst checkpoint of :func:`ok_coverage`'s output, and whether every one meets
-    ``OK_COVER``."""
+#: checkpoints with at least this many ``ok`` runs get their own minimum in the summary
+MANY_OK = 20
+
+
+def ok_summary(cov, ats) -> tuple[str, bool]:
+    """The worst checkpoint of :func:`ok_coverage`'s output ``cov`` (and the worst among
+    those with at least ``MANY_OK`` runs ok), the coverage pooled over every ``ok`` run
+    and checkpoint of ``ats``, and whether every checkpoint meets ``OK_COVER``."""
     have = {k: v for k, v in cov.items() if v[0]}
     if not have:
         return "no ok status at any checkpoint", True
     k = min(have, key=lambda j: (have[j][1], -have[j][0]))
     n, c, name = have[k]
-    first = min(have)
-    return (f"min {c:.3f} ({name}, {n} ok) @{k}; first ok @{first}",
-            all(v[1] >= OK_COVER for v in have.values()))
+    many = {j: v for j, v in have.items() if v[0] >= MANY_OK}
+    txt = f"min {c:.3f} ({name}, {n} ok) @{k}"
+    if many:
+        j = min(many, key=lambda i: (many[i][1], -many[i][0]))
+        txt += f", with >= {MANY_OK} ok {many[j][1]:.3f} ({many[j][2]}, {many[j][0]} ok) @{j}"
+    oks = [c for a in ats for v in a.values() if v[0] for c in v[1].values()]
+    pooled = [all(v[1].values()) for a in ats for v in a.values() if v[0]]
+    txt += (f"; pooled over {len(pooled)} ok run-checkpoints: every coefficient covered "
+            f"{np.mean(pooled):.4f}, per coefficient {np.mean(oks):.4f}; first ok @{min(have)}")
+    return txt, all(v[1] >= OK_COVER for v in have.values())
 
 
 def hour_table(recs):
@@ -183,8 +195,8 @@ def hour_table(recs):
         rr = [r for r in recs if r["name"] == name]
         if not rr:
             continue
-        cov = ok_coverage([r["at"] for r in rr])
-        summ, ok = ok_summary(cov)
+        ats = [r["at"] for r in rr]
+        summ, ok = ok_summary(ok_coverage(ats), ats)
         flat_ok = sum(r["flat"] and r["status"] == "ok" for r in rr)
         passed &= ok and flat_ok == 0
         st = [r["status"] for r in rr]
@@ -192,7 +204,8 @@ def hour_table(recs):
                    f"status at stop ok/warning/failed {st.count('ok')}/{st.count('warning')}/"
                    f"{st.count('failed')}; ML flat {sum(r['flat'] for r in rr)}, of them "
                    f"ok {flat_ok}" + ("" if ok and flat_ok == 0 else "  <-- target missed"))
-        cells = [f"{k}:{n}/{c:.2f}" if n else f"{k}:0" for k, (n, c, _) in cov.items()]
+        cells = [f"{k}:{n}/{c:.2f}" if n else f"{k}:0"
+                 for k, (n, c, _) in ok_coverage(ats).items()]
         for i in range(0, len(cells), 9):
             out.append("      " + "  ".join(cells[i: i + 9]))
     return "\n".join(out), passed
@@ -257,7 +270,8 @@ def chamber_table(recs):
         rows.append((n, f"{true:g}", f"{lr:.2f}", f"{mr:.2f}", f"{lr / mr:.3f}",
                      f"{lb:+.2f}", f"{mb:+.2f}"))
     st = [r["status"] for r in recs]
-    summ, ok = ok_summary(ok_coverage([r["at"] for r in recs]))
+    ats = [r["at"] for r in recs]
+    summ, ok = ok_summary(ok_coverage(ats), ats)
     passed &= ok
     return _fmt(head, rows) + (f"\n  status at stop ok/warning/failed: {st.count('ok')}/"
                                f"{st.count('warning')}/{st.count('failed')}"
