@@ -53,7 +53,8 @@ class LkfOptions:
     the noise levels), after which the filter starts and replays those bins.
 
     ``variant``: ``relin`` (the converging filter of :mod:`~gyrostand.core.lkf.relin`,
-    online re-linearised every ``relinearize_every`` bins, default 100 s of bins, noise
+    online re-linearised every ``relinearize_every`` bins, default 100 s of bins, then every
+    tenth of the record (:mod:`~gyrostand.core.lkf.schedule`), noise
     levels not given re-estimated) or ``paper`` (the paper's single pass at a fixed point;
     ``iterate`` re-linearises its batch run until it settles, at most ``max_iter`` passes,
     relative tolerance ``tol``). ``soaked``: start the moving point in equilibrium with the

@@ -36,6 +36,7 @@ from scipy.special import gammaincinv
 
 from ..errors import GyrostandError
 from .data import Samples
+from .lkf.band import band_warnings
 from .lkf.filter import OnlineLKF, held_names, held_values, lkf_layout, relin_fit
 from .lkf.relin import RelinLKF
 from .lsq.fit import OnlineLSQ, lsq
@@ -159,7 +160,8 @@ class LkfTrack:
     """The online LKF of one gyro: warm-up, then the configured variant bin by bin.
 
     ``relin`` (default): :class:`~gyrostand.core.lkf.relin.RelinLKF`, re-linearised every
-    ``lkf.relinearize_every`` bins (default 100 s of bins), held noise levels not given in
+    ``lkf.relinearize_every`` bins (default 100 s of bins), then every tenth of the record
+    (:mod:`~gyrostand.core.lkf.schedule`), held noise levels not given in
     the session file re-estimated at each re-linearisation. ``paper``: the paper's single
     pass (:class:`~gyrostand.core.lkf.filter.OnlineLKF`) at the warm-up point.
 
@@ -167,9 +169,12 @@ class LkfTrack:
     inconsistent (mean e²/f over the last ``NIS_WINDOW`` bins > ``NIS_FAIL``) or not finite;
     ``warning`` when β ≤ 0, when β's ±3σ band contains 0 (not identified yet), when β sits
     at a bound, when that mean is outside its χ² band (probability ``NIS_ALPHA``), when the
-    last re-linearisation did not settle or moved a coefficient by more than
-    ``STEP_WARN_SIGMA`` stds (still moving), and for the paper variant always (its estimate
-    is one linearisation step, its band is not a confidence band); else ``ok``.
+    last re-linearisation moved a coefficient by more than ``STEP_WARN_SIGMA`` stds (still
+    moving), when any coefficient's band is not calibrated yet
+    (:func:`~gyrostand.core.lkf.band.band_warnings`: the point not settled, a coefficient
+    not identified, off its linearisation point, or b = c/β with β too uncertain; each names
+    its coefficient), and for the paper variant always (its estimate is one linearisation
+    step, its band is not a confidence band); else ``ok``.
     """
 
     model: Model
@@ -325,16 +330,14 @@ class LkfTrack:
             if b >= 0.99 * f.beta_max:
                 warn.append(f"beta = {b:.3g} at its bound 1/dt")
             last = f.last
-            if last is not None:
-                if not last.settled:
-                    warn.append(f"last re-linearisation (bin {last.bins}) did not settle in "
-                                f"{last.passes} passes")
-                elif last.noise_at_bound:
+            if last is not None and last.settled:
+                if last.noise_at_bound:
                     warn.append("a noise level reached a bound of its search (e.g. σ_v/σ "
                                 "outside [1e-3, 1e2]): the band may be too narrow")
                 elif last.step_sigma > STEP_WARN_SIGMA:
                     warn.append(f"estimate still moving: the last re-linearisation (bin "
                                 f"{last.bins}) moved it by {last.step_sigma:.1f} std")
+            warn += band_warnings(f)
         else:
             warn.append("paper variant: one linearisation step at the warm-up point; its "
                         "std is not a confidence band")

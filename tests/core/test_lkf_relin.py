@@ -65,7 +65,8 @@ def test_online_relinearisation_reaches_the_batch_fixed_point():
         f.update(float(s.drift[k]), float(s.temp[k]))
         if k == 999:
             mid = f.estimates
-    assert f.relinearizations == 20 and f.n == len(s) - 1  # starts at the first observed
+    # every 100 bins to 1000, then every tenth of the record: 1100, 1210, ... 1948
+    assert f.relinearizations == 17 and f.n == len(s) - 1  # starts at the first observed
     assert np.isfinite(mid["markov.beta"][1])
     f.relinearize()
     best = ml(s, M)

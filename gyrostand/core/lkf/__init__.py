@@ -15,6 +15,8 @@ EXPORTS: dict[str, str] = {
     "lkf_layout": "filter",
     "relin_fit": "filter",
     "RelinLKF": "relin",
+    "RelinSchedule": "schedule",
+    "band_warnings": "band",
 }
 __all__ = sorted(EXPORTS)
 __getattr__, __dir__ = exports(__name__, EXPORTS, globals())

@@ -7,7 +7,9 @@ reach the exact-likelihood accuracy (measured by ``benchmarks/lkf_accuracy.py``)
 1. **Feedback.** The δβ column of F is taken along the filtered drift ε̂ = ε₀ + δε̂, not
    along ε₀ alone, so the random part of the drift — most of the information on β when
    the process noise dominates — enters the estimate of β (the term δβ·δε the paper drops).
-2. **Re-linearisation.** Every ``relinearize_every`` bins the point (β₀ and every linear
+2. **Re-linearisation.** On a geometric schedule (:mod:`~gyrostand.core.lkf.schedule`:
+   every ``relinearize_every`` bins at first, then every tenth of the record, backing off
+   while the point does not settle: linear total cost) the point (β₀ and every linear
    coefficient) is moved to the current estimate and the stored history is filtered again
    at that point, repeatedly, until the estimate equals its point (a fixed point
    θ = g(θ)); each pass is one compiled loop over the record
@@ -43,6 +45,7 @@ from .noise import NOISE_STEP as NOISE_STEP
 from .noise import RATIO_BOUNDS as RATIO_BOUNDS
 from .noise import inflation, reestimate
 from .online import ONLINE_RATE_WINDOW, causal_rate, default_prior_std, lkf_terms
+from .schedule import RelinSchedule
 from .squarem import fixed_point
 
 log = logging.getLogger(__name__)
@@ -97,7 +100,9 @@ class RelinLKF:
         held: every held value (``markov.sigma``, ``white.sigma``, ``random_walk.q``,
             ``markov2.beta``, ``markov2.sigma``, ``warmup.tau`` as the model has them).
         fixed: names in ``held`` that stay as given (not re-estimated).
-        relinearize_every: bins between re-linearisations (0: never, a single pass).
+        relinearize_every: the shortest spacing of the periodic re-linearisations, bins
+            (0: never, a single pass); they space out geometrically
+            (:mod:`~gyrostand.core.lkf.schedule`).
         soaked: start ε₀ in equilibrium with the first temperature.
         feedback: δβ column along ε̂ (True) or ε₀ (False, the paper's).
         prior_std: prior std of the corrections (by name, and ``delta_eps``).
@@ -156,13 +161,16 @@ class RelinLKF:
         self.last: Relinearization | None = None
         self.relinearizations = 0
         self.total_passes = 0
-        self._since = 0
+        #: re-filter work: Σ passes × bins re-filtered (inflation passes not counted)
+        self.refiltered = 0
+        self.schedule = RelinSchedule(self.every)
         self._qd: float | None = None
         #: (apply, ẑ, var ẑ, steps (h, k) of the inflation passes, at bound) of the last
         #: noise search, or None
         self._noise: tuple[Callable[[float], None], float, float,
                            tuple[tuple[float, float], ...], bool] | None = None
         self._infl = np.zeros((len(self.names),) * 2)
+        self.prior_sd = np.full(len(self.names), np.inf)
         self._configure()
         self.x = np.zeros(len(self.layout))
         self.P = np.zeros((len(self.layout),) * 2)
@@ -232,6 +240,8 @@ class RelinLKF:
         self._st[0] = eps0
         self.x[:] = 0.0
         self.P = P
+        #: prior std of each internal coefficient (``names``) at the last start
+        self.prior_sd = np.sqrt(np.diag(P)[1: 1 + len(self.names)])
 
     # ---- data ---------------------------------------------------------------------------
     def _grow(self) -> None:
@@ -303,16 +313,16 @@ class RelinLKF:
         if k == 0:
             self._start()
         self._pass(k, k + 1, self._Uin)
-        self._since += 1
-        if self.every > 0 and self._since >= self.every:
-            self.relinearize(settle_sigma=ONLINE_SETTLE_SIGMA)
+        if self.schedule.is_due(self.n):
+            self.relinearize(self.schedule.max_passes(self.max_passes),
+                             settle_sigma=ONLINE_SETTLE_SIGMA)
 
     def relinearize(self, max_passes: int | None = None,
                     settle_sigma: float = SETTLE_SIGMA) -> Relinearization:
         """Move the point to the current estimate and re-filter the record until the
         estimate equals its point within ``settle_sigma`` of its std (at most
-        ``max_passes`` passes)."""
-        self._since = 0
+        ``max_passes`` passes); the next periodic one is then due as
+        :class:`~gyrostand.core.lkf.schedule.RelinSchedule` says."""
         n = self.n
         if n == 0:
             raise ModelError("lkf: no observed bin to re-linearise on")
@@ -350,6 +360,8 @@ class RelinLKF:
             np.isfinite(before)) else math.inf
         self.relinearizations += 1
         self.total_passes += passes
+        self.refiltered += passes * n
+        self.schedule.record(n, passes, settled)
         self.last = Relinearization(n, passes, settled, step,
                                     {k: v for k, v in self.held.items()
                                      if self.model.kind(k) == "std"},
@@ -376,6 +388,12 @@ class RelinLKF:
         reestimate(self, ctx)
 
     # ---- results ------------------------------------------------------------------------
+    @property
+    def offset_key(self) -> str | None:
+        """Internal name of the constant output entered as c = βb (``bias.beta_b``), or
+        None."""
+        return self._offset_key
+
     @property
     def values(self) -> np.ndarray:
         """Current estimate of :attr:`names` (point + correction)."""
