@@ -17,7 +17,9 @@ stops the others.
                           "fits": {"lkf": FitResult.to_dict(), "lkf_batch": {...},
                                    "ml": {...},
                                    "lsq": {"error": "..."}},
-                          "online": {"lkf": {"status": ..., "parameters": {...}}}}},
+                          "online": {"lkf": {"status": ..., "parameters": {...}}},
+                          "units": {"drift": "deg/h", "temp": "degC", "t": "s",
+                                    "parameters": {"temp.gamma": "(deg/h)/(s·°C)", ...}}}},
      "stats": {decoder, binner, recorder, responses, commands, timing}}
 """
 
@@ -37,6 +39,7 @@ from ..core.data import Samples
 from ..core.model import Model
 from ..core.registry import REGISTRY
 from ..core.results import FitResult
+from ..core.summary import unit_text
 from ..errors import GyrostandError
 from ..runfolder import finite, json_safe, write_atomic, write_json
 from .online import LkfPoint, OnlineEstimate
@@ -80,7 +83,15 @@ class GyroFinal:
             "parameters": {k: {"value": finite(v), "std": finite(s)}
                            for k, (v, s) in e.values.items()}} for e in self.online}
         return {"model": list(self.model.names), "t0": finite(self.t0), "bins": self.bins,
-                "gaps": self.gaps, "observed": self.observed, "fits": fits, "online": online}
+                "gaps": self.gaps, "observed": self.observed, "fits": fits, "online": online,
+                "units": self.units()}
+
+    def units(self) -> dict[str, Any]:
+        """The units of the numbers above: the drift's (the DBC signal's), the
+        temperature's, the time's, and each parameter's with the drift's in place of the
+        model's ``y`` (as every table prints it)."""
+        return {"drift": self.unit, "temp": "degC", "t": "s",
+                "parameters": {n: unit_text(q.unit, self.unit) for n, q in self.model.params}}
 
 
 def samples_of(cols: Mapping[str, Sequence[float]], dt: float,

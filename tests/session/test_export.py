@@ -69,6 +69,19 @@ def test_parquet_round_trip(run_dir, tmp_path, capsys):
     assert eu["lsq:temp.gamma"] == "(deg/h)/(s·°C)" and eu["lkf:markov.sigma"] == "deg/h"
 
 
+def test_result_json_carries_the_units_of_its_numbers(run_dir):
+    """Units in every document (issue 27): result.json's gyro has the units the Parquet
+    export's fields carry, each parameter's as the tables print it."""
+    import json
+
+    units = json.loads((run_dir / "result.json").read_text())["gyros"]["az"]["units"]
+    assert {k: units[k] for k in ("drift", "temp", "t")} == {
+        "drift": "deg/h", "temp": "degC", "t": "s"}
+    assert units["parameters"]["temp.gamma"] == "(deg/h)/(s·°C)"
+    assert units["parameters"]["markov.beta"] == "1/s"
+    assert units["parameters"]["markov.sigma"] == "deg/h"
+
+
 def test_mf4_round_trip(run_dir, tmp_path, capsys):
     assert main(["export", str(run_dir), "--mf4", "--out", str(tmp_path)]) == 0
     path = tmp_path / f"{run_dir.name}.mf4"
