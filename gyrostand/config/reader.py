@@ -34,6 +34,7 @@ class Reader:
         self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
         self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
         self.match = "id"  # the session's default channel `match` once parsed
+        self.drift_unit = "deg/h"  # session.drift_unit once parsed
 
     # -- helpers ---------------------------------------------------------------------
     def fail(self, path: str, msg: str) -> ConfigError:

@@ -114,7 +114,7 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
     gaps = sum(1 for a, b in zip(cols["n_drift"], cols["n_temp"], strict=True)
                if a == 0 or b == 0)
     out = GyroFinal(gyro.name, model, math.nan, n, gaps, 0, online=list(online),
-                    unit=gyro.drift.signal.unit or "y")
+                    unit=gyro.drift.unit or "y")
     if not n:
         for m in final_methods(gyro):
             out.fits[m] = "no bins were recorded for this gyro"

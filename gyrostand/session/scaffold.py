@@ -38,6 +38,12 @@ from gyrostand.can.survey import (
     survey,
     with_daemon_frames,
 )
+from gyrostand.can.units import (
+    DEFAULT_DRIFT_UNIT,
+    UnitError,
+    rate_conversion,
+    temperature_conversion,
+)
 from gyrostand.errors import ConfigError
 
 __all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus"]
@@ -143,7 +149,7 @@ def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None 
             results = {g: (res[g], summ.get(g, "")) for g in res}
         else:
             own = load_dbc(own_dbc)
-            merged = with_daemon_frames(db, own, [g.drift.unit for g in sv.gyros], id_base,
+            merged = with_daemon_frames(db, own, [_units(sv)[0]] * len(sv.gyros), id_base,
                                         str(dbc))
             dbc_for_session = out.resolve().with_name(f"{out.stem}+gyrostand.dbc")
             if dbc_for_session == dbc:
@@ -180,10 +186,13 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
          "# Every key is explained in configs/demo.yaml of the gyrostand repository.", ""]
     for w in sv.warnings:
         L.append(f"# CHECK: {w}")
+    drift_unit, unit_notes = _units(sv)
     L += ["session:",
           f"  name: {_yaml_str(session_name)}",
           "  output: runs                    # run folders go here (relative to this file)",
           "  fsync: true                     # each 1-s acknowledgement survives a power cut",
+          f"  drift_unit: {json.dumps(drift_unit, ensure_ascii=False)}"
+          "              # every drift is binned in this unit",
           "",
           "bus:                              # passed to can.Bus(**bus)"]
     L += [f"  # {line}" for line in bus_note]
@@ -196,7 +205,7 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
         L.append(f"  - name: {_yaml_str(g.name)}")
         L.append(f"    # drift:       {_describe(g.drift, g.drift_counter, db)}")
         L.append(f"    # temperature: {_describe(g.temperature, g.temperature_counter, db)}")
-        for note in g.notes:
+        for note in g.notes + unit_notes.get(g.name, []):
             L.append(f"    # CHECK: {note}")
         L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message)))
         L.append(_channel_line("temperature", g.temperature, g.temperature_counter,
@@ -226,6 +235,38 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
     L += ["", "# To try this layout without the stand, add a simulate: section (see",
           "# configs/demo.yaml) and run `gyrostand demo --config THIS.yaml`.", ""]
     return "\n".join(L)
+
+
+def _units(sv: Survey) -> tuple[str, dict[str, list[str]]]:
+    """The session's drift unit (the drift signals' own when they share one known unit,
+    else deg/h) and, per gyro, the conversions proposed (K/°F/mK to °C, a drift to the
+    session's unit) or the unit that cannot be converted."""
+    units = {g.drift.unit for g in sv.gyros if g.drift.unit.strip()}
+    known = all(_convertible(u) for u in units)
+    drift_unit = units.pop() if len(units) == 1 and known else DEFAULT_DRIFT_UNIT
+    notes: dict[str, list[str]] = {}
+    for g in sv.gyros:
+        for role, s in (("drift", g.drift), ("temperature", g.temperature)):
+            try:
+                conv = (rate_conversion(s.unit, drift_unit) if role == "drift"
+                        else temperature_conversion(s.unit))
+            except UnitError as exc:
+                notes.setdefault(g.name, []).append(
+                    f"{role} {s.message}.{s.signal}: {exc}: give its unit (unit: ...)")
+                continue
+            if conv is not None:
+                notes.setdefault(g.name, []).append(
+                    f"{role} {s.message}.{s.signal} is converted at decode time: "
+                    f"{conv.describe()}")
+    return drift_unit, notes
+
+
+def _convertible(unit: str) -> bool:
+    try:
+        rate_conversion(unit)
+    except UnitError:
+        return False
+    return True
 
 
 def default_bus(session_name: str, channel: str = "can0"

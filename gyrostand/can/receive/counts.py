@@ -30,6 +30,8 @@ class Rejections:
     error_frame: int = 0
     remote_frame: int = 0
     overflow: int = 0       # the sample buffer (or command queue) was full
+    not_available: int = 0  # every mapped value a VAL_ code (NotAvailable, Error, SNA...)
+    invalid: int = 0        # the message's validity signal marked the frame invalid
 
 
 #: Rejection reasons, in the order of :attr:`DecodeStats.rejected`.
@@ -49,6 +51,7 @@ class Counts:
     counter_jumps: int = 0
     bus_errors: int = 0
     listener_errors: int = 0
+    not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
 
 
 #: The fields of :class:`Counts`, in order (the first keys of ``stats.decoder``).
@@ -68,6 +71,7 @@ class DecodeStats:
     bus_errors: int
     listener_errors: int
     rejected: dict[str, int]
+    not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
     clock_steps: int = 0  # confirmed steps of the frames' clock (each re-anchored)
     held: int = 0  # frames waiting for a second frame to confirm their time
 

@@ -20,6 +20,7 @@ from gyrostand.can.logs.frames import ERROR_FRAME, Frame
 from gyrostand.can.receive.commands import CommandQueue
 from gyrostand.can.receive.state import Sample
 from gyrostand.can.receive.timing import FrameTiming
+from gyrostand.can.routes import Dropped, Invalid
 
 __all__ = ["FramePath"]
 
@@ -122,6 +123,12 @@ class FramePath(FrameTiming, CommandQueue):
                         continue
                     try:
                         values = route.decode(data)
+                    except Dropped as why:  # the DBC says: no measurement in this frame
+                        if isinstance(why, Invalid):
+                            rej.invalid += 1
+                        else:
+                            rej.not_available += 1
+                        continue
                     except Exception:
                         rej.undecodable += 1
                         continue

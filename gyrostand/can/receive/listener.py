@@ -33,7 +33,8 @@ from gyrostand.can.receive.arrays import ArrayPath
 from gyrostand.can.receive.counts import COUNT_FIELDS, REASONS, Counts, DecodeStats, Rejections
 from gyrostand.can.receive.extract import array_extractor, extractor
 from gyrostand.can.receive.state import UNRANGED_LIMIT, Held, Sample
-from gyrostand.can.routes import ChannelMap, Route, decoder
+from gyrostand.can.routes import ChannelMap, Route, checked_decoder, decoder
+from gyrostand.can.validity import code_values
 
 __all__ = ["DecodingListener"]
 
@@ -104,7 +105,8 @@ class DecodingListener(ArrayPath, can.Listener):
                 continue
             cnames = [x[5] for x in route.extract if x[5]]
             self._array_decode[id(route)] = array_extractor(
-                route.message, [x[2] for x in route.extract] + cnames, ints=cnames)
+                route.message, [x[2] for x in route.extract] + cnames
+                + [v[0] for v in route.valid], ints=cnames)
         self._table = None
         self._committing = False
         self.reset_counters()
@@ -112,20 +114,44 @@ class DecodingListener(ArrayPath, can.Listener):
     def _map_signals(self, db: Database, channels: ChannelMap) -> None:
         """A route per mapped message, with what it extracts per mapped signal (range,
         rolling counter and its modulus) and a decoder of those signals only."""
+        codes: dict[int, dict[str, frozenset]] = {}
+        valid: dict[int, dict[str, tuple[str, frozenset, bool]]] = {}
         for g, pair in enumerate(channels.signals):
             for c, ref in enumerate(pair):
                 route = self._route(db, ref.message)
                 lo = -UNRANGED_LIMIT if ref.minimum is None else ref.minimum
                 hi = UNRANGED_LIMIT if ref.maximum is None else ref.maximum
+                conv = channels.convert[g][c] if channels.convert else None
+                if conv is not None:  # the range check runs on the converted value
+                    lo, hi = sorted((conv(lo), conv(hi)))
+                    route.convert[ref.name] = (conv.scale, conv.offset)
                 cnt = channels.counters[g][c] if channels.counters else None
                 mod = 256
                 if cnt is not None and cnt.maximum is not None:
                     mod = int(cnt.maximum) + 1
                 route.extract.append((g, c, ref.name, lo, hi,
                                       cnt.name if cnt else None, mod, (g, c)))
+                bad = code_values(route.message.get_signal_by_name(ref.name))
+                if bad:
+                    codes.setdefault(id(route), {})[ref.name] = bad
+                v = channels.valid[g][c] if channels.valid else None
+                if v is not None:
+                    valid.setdefault(id(route), {})[v[0]] = v
         for route in self._routes.values():  # the mapped signals only, layout-blind
-            needed = [x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+            vs = list(valid.get(id(route), {}).values())
+            needed = ([x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+                      + [v[0] for v in vs])
             route.decode = extractor(route.message, needed) or route.decode
+            cs = codes.get(id(route), {})
+            route.codes, route.valid = cs, vs
+            route.checked = bool(cs or vs)
+            if route.checked or route.convert:  # decoded, checked and converted per frame
+                route.decode = checked_decoder(route.decode, [x[2] for x in route.extract],
+                                               cs, vs, route.convert, self._count_codes)
+
+    def _count_codes(self, k: int) -> None:
+        """``k`` mapped values were value-table codes (the lock is held: per-frame path)."""
+        self._n.not_available += k
 
     def _route(self, db: Database, ref: MessageRef) -> Route:
         if ref.key not in self._routes:
