@@ -44,6 +44,7 @@ from gyrostand.can.units import (
     rate_conversion,
     temperature_conversion,
 )
+from gyrostand.can.validity import is_code_name, status_signals
 from gyrostand.errors import ConfigError
 
 __all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus"]
@@ -98,10 +99,47 @@ def _match_results(gyros: list[GyroProposal], names: list[str]) -> dict[str, str
     return out
 
 
-def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str) -> str:
+def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str, db: Any) -> str:
     counter_part = f", counter: {_yaml_str(counter)}" if counter else ""
     match = ", match: pgn" if s.j1939 else ""  # any priority and source address
-    return f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}{match}}}"
+    valid = ""
+    v = _validity(s, counter, db)
+    if v is not None:
+        valid = f", valid: {{signal: {_yaml_str(v[0])}, accept: [{', '.join(v[1])}]}}"
+    return (f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}{match}"
+            f"{valid}}}")
+
+
+def _validity(s: SignalInfo, counter: str | None, db: Any) -> tuple[str, list[str]] | None:
+    """The message's validity signal and the values its value table names valid (a
+    state of no measurement, ``invalid``/``error``/``not available``, left out)."""
+    msg = db.get_message_by_name(s.message)
+    found = status_signals(msg, [s.signal] + ([counter] if counter else []))
+    if not found:
+        return None
+    name = found[0][0]
+    sig = msg.get_signal_by_name(name)
+    ok = [f"{sig.conversion.raw_to_scaled(int(raw), False):g}"
+          for raw, label in sorted(sig.choices.items()) if not is_code_name(str(label))]
+    return (name, ok) if ok else None
+
+
+def _codes_note(s: SignalInfo, counter: str | None, db: Any) -> list[str]:
+    """What the DBC's value tables say of a mapped signal's frames: codes counted, never
+    binned; the validity signal whose other values drop the frame."""
+    msg = db.get_message_by_name(s.message)
+    sig = msg.get_signal_by_name(s.signal)
+    out = []
+    codes = [f"{raw} {label!s}" for raw, label in sorted((sig.choices or {}).items())
+             if is_code_name(str(label))]
+    if codes:
+        out.append(f"{s.message}.{s.signal} codes {', '.join(codes)}: counted "
+                   "(not_available), never binned")
+    v = _validity(s, counter, db)
+    if v is not None:
+        out.append(f"{s.message}.{v[0]} marks frames valid at {', '.join(v[1])}; others "
+                   "are dropped (invalid)")
+    return out
 
 
 def _describe(s: SignalInfo, counter: str | None, db: Any) -> str:
@@ -205,11 +243,14 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
         L.append(f"  - name: {_yaml_str(g.name)}")
         L.append(f"    # drift:       {_describe(g.drift, g.drift_counter, db)}")
         L.append(f"    # temperature: {_describe(g.temperature, g.temperature_counter, db)}")
-        for note in g.notes + unit_notes.get(g.name, []):
+        codes = (_codes_note(g.drift, g.drift_counter, db)
+                 + _codes_note(g.temperature, g.temperature_counter, db))
+        for note in g.notes + unit_notes.get(g.name, []) + codes:
             L.append(f"    # CHECK: {note}")
-        L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message)))
+        L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message),
+                               db))
         L.append(_channel_line("temperature", g.temperature, g.temperature_counter,
-                               _yaml_str(g.temperature.message)))
+                               _yaml_str(g.temperature.message), db))
         L.append(f"    model: [{', '.join(DEFAULT_MODEL)}]       # terms: see README "
                  "'Model terms'")
         L.append(f"    identifiers: [{', '.join(DEFAULT_IDENTIFIERS)}]  # online; ml always "
