@@ -220,10 +220,11 @@ class GyroSections(Reader):
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         """A drift signal belongs to one gyro; a temperature signal may serve several (one
         sensor on a multi-axis IMU's board), but never also as a drift."""
-        owner: dict[tuple[int, str], tuple[str, str]] = {}
+        owner: dict[tuple[int, str, int | None], tuple[str, str]] = {}
         for i, g in enumerate(gyros):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
-                key = (c.signal.message.key, c.signal.name)
+                # one J1939 device per source address: the same signal of another is free
+                key = (c.signal.message.key, c.signal.name, c.source_address)
                 path = f"gyros[{i}].{ch}.signal"
                 if key in owner and (ch == "drift" or owner[key][1] == "drift"):
                     raise self.fail(path, f"{c.signal.message.name}.{c.signal.name} is already "
@@ -234,8 +235,12 @@ class GyroSections(Reader):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
                 k = c.signal.message.key
                 path = f"gyros[{i}].{ch}.match"
-                if k in keys and keys[k][1] != c.match:
-                    raise self.fail(path, f"{c.signal.message.name} is matched by "
-                                          f"{keys[k][1]} at {keys[k][0]}")
-                keys.setdefault(k, (path, c.match))
+                how = c.match + (" with source_address" if c.source_address is not None
+                                 else "")
+                if k in keys and keys[k][1] != how:
+                    where = path if c.match != keys[k][1].split()[0] else \
+                        f"gyros[{i}].{ch}.source_address"
+                    raise self.fail(where, f"{c.signal.message.name} is matched by "
+                                           f"{keys[k][1]} at {keys[k][0]}")
+                keys.setdefault(k, (path, how))
 

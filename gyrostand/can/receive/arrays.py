@@ -31,6 +31,8 @@ _IGNORED = -1  # an id of the DBC that is not mapped
 _NOT_HERE = -2  # a route the array path does not take (a command)
 _UNKNOWN = -3  # an id not in the DBC
 _FLAGGED = -4  # an error or remote frame
+_OTHER_SOURCE = -5  # a mapped PGN from a source address no channel maps (ignored)
+_SECOND_SOURCE = -6  # a mapped PGN from a second source address (rejected)
 
 
 class _Lookup(NamedTuple):
@@ -41,6 +43,7 @@ class _Lookup(NamedTuple):
     code: Any
     routes: list[Route]
     nroutes: int
+    nforeign: int
 
 
 class _Decoded(NamedTuple):
@@ -102,7 +105,8 @@ class ArrayPath(FramePath):
         ``_IGNORED`` a DBC id not mapped, ``_NOT_HERE`` a route the array path does not
         take (a command). Rebuilt when routes were added (J1939 ids cached by
         :meth:`_pgn_route`)."""
-        if self._table is not None and self._table[3] == len(self._routes):
+        if (self._table is not None and self._table[3] == len(self._routes)
+                and self._table[4] == len(self._foreign)):
             return self._table  # type: ignore[return-value]
         import numpy as np
 
@@ -115,9 +119,11 @@ class ArrayPath(FramePath):
                 if r not in routes:
                     routes.append(r)
                 codes[k] = routes.index(r)
+        for k, pinned in self._foreign.items():
+            codes[k] = _OTHER_SOURCE if pinned else _SECOND_SOURCE
         keys = np.array(sorted(codes), dtype=np.int64)
         code = np.array([codes[k] for k in sorted(codes)], dtype=np.int64)
-        self._table = _Lookup(keys, code, routes, len(self._routes))
+        self._table = _Lookup(keys, code, routes, len(self._routes), len(self._foreign))
         return self._table
 
     def _route_values(self, r: Route, data, np) -> tuple:  # noqa: C901
@@ -188,6 +194,7 @@ class ArrayPath(FramePath):
             if pgn in self._by_pgn:
                 if self._pgn_route(k) is not None and k not in self._routes:
                     hint.append(k)  # routed but not cached (MAX_ROUTES)
+
             elif (k not in self._known and pgn in self._pgn_hint
                   and k not in self._hinted and len(self._hinted) < 64):
                 hint.append(k)
@@ -274,8 +281,11 @@ class ArrayPath(FramePath):
         n.bus_errors += nerr
         rej.error_frame += nerr
         rej.remote_frame += int(np.count_nonzero(fl != 0)) - nerr
+        other = int(np.count_nonzero(cs == _OTHER_SOURCE))
         n.ignored += (int(np.count_nonzero(cs == _IGNORED))
-                      + int(np.count_nonzero(ign[:stop])))
+                      + int(np.count_nonzero(ign[:stop]))) + other
+        n.other_source += other
+        rej.second_source += int(np.count_nonzero(cs == _SECOND_SOURCE))
         unknown = cs == _UNKNOWN
         nunk = int(np.count_nonzero(unknown))
         rej.unknown_id += nunk
@@ -316,9 +326,12 @@ class ArrayPath(FramePath):
             ext = (key & EXTENDED_KEY_BIT) != 0
             odd = ((c == _UNKNOWN) | (c == _IGNORED)) & ext
             if odd.any():
-                routed_now = len(self._routes)
-                hint = self._j1939_hints(np.unique(key[odd]).tolist())
-                if len(self._routes) != routed_now:  # J1939 ids routed: look up again
+                routed_now = len(self._routes), len(self._foreign)
+                # in order of first appearance: the first source address seen is the
+                # device's (what the per-frame path decides)
+                uk, first = np.unique(key[odd], return_index=True)
+                hint = self._j1939_hints(uk[np.argsort(first)].tolist())
+                if (len(self._routes), len(self._foreign)) != routed_now:  # look up again
                     return self._receive_arrays(fa)
                 if hint:
                     bad |= np.isin(key, hint)

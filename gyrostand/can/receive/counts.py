@@ -32,6 +32,7 @@ class Rejections:
     overflow: int = 0       # the sample buffer (or command queue) was full
     not_available: int = 0  # every mapped value a VAL_ code (NotAvailable, Error, SNA...)
     invalid: int = 0        # the message's validity signal marked the frame invalid
+    second_source: int = 0  # a mapped J1939 PGN from a 2nd source address (not mapped)
 
 
 #: Rejection reasons, in the order of :attr:`DecodeStats.rejected`.
@@ -52,6 +53,7 @@ class Counts:
     bus_errors: int = 0
     listener_errors: int = 0
     not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
+    other_source: int = 0  # ignored: a mapped PGN from a source address no channel maps
 
 
 #: The fields of :class:`Counts`, in order (the first keys of ``stats.decoder``).
@@ -72,6 +74,7 @@ class DecodeStats:
     listener_errors: int
     rejected: dict[str, int]
     not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
+    other_source: int = 0  # ignored: a mapped PGN from a source address no channel maps
     clock_steps: int = 0  # confirmed steps of the frames' clock (each re-anchored)
     held: int = 0  # frames waiting for a second frame to confirm their time
 

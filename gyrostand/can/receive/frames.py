@@ -73,7 +73,14 @@ class FramePath(FrameTiming, CommandQueue):
     def _unrouted(self, key: int) -> None:
         """Count a frame whose key has no route: a DBC id not mapped (ignored) or an id
         not in the DBC (rejected; an extended one of a mapped PGN is named once)."""
-        if key in self._known:
+        pinned = self._foreign.get(key)
+        if pinned is not None:  # a mapped PGN from a source address not taken
+            if pinned:
+                self._n.ignored += 1
+                self._n.other_source += 1
+            else:
+                self._rej.second_source += 1
+        elif key in self._known:
             self._n.ignored += 1
         else:
             self._rej.unknown_id += 1

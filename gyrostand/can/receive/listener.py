@@ -81,16 +81,29 @@ class DecodingListener(ArrayPath, can.Listener):
         self._routes: dict[int, Route] = {}
         self._known = {frame_key(m.frame_id, bool(m.is_extended_frame)) for m in db.messages}
         self._last_counter: dict[tuple[int, int], int] = {}
+        self._pinned: dict[int, tuple[int, int]] = {}  # route key -> (PGN, source address)
         self._map_signals(db, channels)
-        # J1939: PGN -> route of the messages matched by PGN; an extended id of such a PGN
-        # is looked up once and then cached in _routes under its own key
-        self._by_pgn = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r for k, r in self._routes.items()
-                        if k in channels.pgn}
+        # J1939: PGN -> route of the messages matched by PGN (any source address; the first
+        # one seen is taken, _first_sa), or {source address: route} where the session maps
+        # each address; an extended id of such a PGN is looked up once, then cached in
+        # _routes under its own key; an id of another address is named once (_foreign)
+        self._by_pgn: dict[int, Route | dict[int, Route]] = {}
+        for k, r in self._routes.items():
+            if k in self._pinned:
+                pgn, sa = self._pinned[k]
+                by_sa = self._by_pgn.setdefault(pgn, {})
+                assert isinstance(by_sa, dict)
+                by_sa[sa] = r
+            elif k in channels.pgn:
+                self._by_pgn[j1939_pgn(k & ~EXTENDED_KEY_BIT)] = r
+        self._first_sa: dict[int, int] = {}
+        self._foreign: dict[int, bool] = {}
         # the other extended mapped messages by PGN, to say once when frames of their PGN
         # arrive from another source address (matching on the full id drops them)
         self._pgn_hint = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r.message.name
                           for k, r in self._routes.items()
-                          if k & EXTENDED_KEY_BIT and k not in channels.pgn}
+                          if k & EXTENDED_KEY_BIT and k not in channels.pgn
+                          and k not in self._pinned}
         self._hinted: set[int] = set()
         if command is not None:  # a command is read whole, by cantools
             route = self._route(db, command)
@@ -107,6 +120,10 @@ class DecodingListener(ArrayPath, can.Listener):
             self._array_decode[id(route)] = array_extractor(
                 route.message, [x[2] for x in route.extract] + cnames
                 + [v[0] for v in route.valid], ints=cnames)
+        # a PGN matched from any address is routed through _pgn_route, its DBC id too
+        # (the first source address seen is the device's)
+        for k in [k for k in self._routes if k in channels.pgn and k not in self._pinned]:
+            del self._routes[k]
         self._table = None
         self._committing = False
         self.reset_counters()
@@ -118,7 +135,12 @@ class DecodingListener(ArrayPath, can.Listener):
         valid: dict[int, dict[str, tuple[str, frozenset, bool]]] = {}
         for g, pair in enumerate(channels.signals):
             for c, ref in enumerate(pair):
-                route = self._route(db, ref.message)
+                sa = channels.sources[g][c] if channels.sources else None
+                key = ref.message.key
+                if sa is not None:  # the device at this J1939 source address only
+                    key = (key & ~0xFF) | sa
+                    self._pinned[key] = (j1939_pgn(key & ~EXTENDED_KEY_BIT), sa)
+                route = self._route(db, ref.message, key)
                 lo = -UNRANGED_LIMIT if ref.minimum is None else ref.minimum
                 hi = UNRANGED_LIMIT if ref.maximum is None else ref.maximum
                 conv = channels.convert[g][c] if channels.convert else None
@@ -153,11 +175,12 @@ class DecodingListener(ArrayPath, can.Listener):
         """``k`` mapped values were value-table codes (the lock is held: per-frame path)."""
         self._n.not_available += k
 
-    def _route(self, db: Database, ref: MessageRef) -> Route:
-        if ref.key not in self._routes:
+    def _route(self, db: Database, ref: MessageRef, key: int | None = None) -> Route:
+        key = ref.key if key is None else key
+        if key not in self._routes:
             msg = db.get_message_by_name(ref.name)
-            self._routes[ref.key] = Route(msg, msg.length)
-        return self._routes[ref.key]
+            self._routes[key] = Route(msg, msg.length)
+        return self._routes[key]
 
     def resync(self) -> None:
         """After a bus outage: forget the rolling counters' last values (frames were lost).
