@@ -130,6 +130,9 @@ class Pipeline:
         if st is not None:
             if st.t0 is not None:
                 self.binner.resume_after(st.t0, st.last_k(self.cfg.sampling.dt))
+                last = [c["t"][-1] for c in st.columns.values() if c["t"]]
+                if last:  # frames are timed as after the kept bins: a clock that went
+                    self.listener.resume_after(max(last))  # back re-anchors, as live
             self.resumed = self.files.resume(st)
             log.info("resumed with %s kept bins per gyro", self.resumed)
         self.responses.start()

@@ -189,6 +189,14 @@ class DecodingListener(ArrayPath, can.Listener):
         with self._lock:
             self._last_counter.clear()
 
+    def resume_after(self, t: float) -> None:
+        """A resumed run: frame time ``t`` (s, the start of the last kept bin) stands for
+        the newest accepted frame, so the next frames are timed as if they followed it:
+        later ones within ``max_gap`` are a pause, earlier ones (a stand clock that went
+        back) a clock step re-anchored into the bins after it, never late."""
+        with self._lock:
+            self._anchor = float(t)
+
     def reset_counters(self) -> None:
         """Zero every counter (the FIFO and timestamp history are kept)."""
         with self._lock:
