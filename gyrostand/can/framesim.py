@@ -139,6 +139,11 @@ def _values(truth: Truth, channel: int, tf: np.ndarray, opts: FrameSimOptions,
         v = (v - conv.offset) / conv.scale
     lo = -np.inf if ref.minimum is None else ref.minimum
     hi = np.inf if ref.maximum is None else ref.maximum
+    out = (v < lo) | (v > hi)
+    if out.any():  # never silently: the simulated stand saturates what the DBC cannot carry
+        log.warning("simulated %s.%s: %d of %d values outside its DBC range [%g, %g] "
+                    "(%g .. %g), saturated", ref.message.name, ref.name,
+                    int(out.sum()), v.size, lo, hi, float(np.nanmin(v)), float(np.nanmax(v)))
     return np.clip(v, lo, hi)
 
 

@@ -169,6 +169,7 @@ class _Parser(GyroSections, SimulateSection):
         simulate = None
         if top.get("simulate") is not None:
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
+            self.check_profile_range(simulate.temperature, gyros)
         reconnect = self.reconnect(top.get("reconnect") or {})
         return SessionConfig(
             path=Path(self.source), name=name, output=output, fsync=fsync, formats=formats,
@@ -190,6 +191,22 @@ class _Parser(GyroSections, SimulateSection):
         return tuple(dataclasses.replace(g, drift=dataclasses.replace(
             g.drift, convert=None, unit=unit))
                      for g in gyros)
+
+    def check_profile_range(self, points, gyros: tuple[GyroConfig, ...]) -> None:
+        """A simulated temperature the DBC signal cannot carry would be saturated at its
+        range without a word: refused, naming the breakpoint and the range (°C)."""
+        for g in gyros:
+            ch = g.temperature
+            lo, hi = ch.signal.minimum, ch.signal.maximum
+            if ch.convert is not None:
+                lo = None if lo is None else ch.convert(lo)
+                hi = None if hi is None else ch.convert(hi)
+            for i, (_, temp) in enumerate(points):
+                if (lo is not None and temp < lo) or (hi is not None and temp > hi):
+                    raise self.fail(f"simulate.temperature[{i}]", f"{temp:g} degC is outside "
+                                    f"the range of {ch.signal.message.name}."
+                                    f"{ch.signal.name} ({lo:g} .. {hi:g} degC): the "
+                                    "simulated stand would saturate it")
 
     def bus(self, value: Any) -> dict[str, Any]:
         """``bus:``, the ``can.Bus`` arguments: a mapping, maybe empty (``bus: {}``; a key
