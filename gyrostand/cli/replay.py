@@ -98,4 +98,9 @@ def run(args: argparse.Namespace) -> int:
                          "the ids); map each device with source_address: on its channels")
     for why in empty:  # bad input: the logs hold nothing of this session's messages
         print(f"error: {why}", file=sys.stderr)
-    return 2 if empty else 0
+    if empty:
+        return 2
+    faults = [o for o in outcomes if not o.ok]
+    for o in faults:  # e.g. the disk filled: a fault, named with its folder
+        print(f"error: {o.run_dir}: {o.stop_reason}", file=sys.stderr)
+    return 1 if faults else 0

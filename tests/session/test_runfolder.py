@@ -4,7 +4,6 @@ and repair), the ledger on top of it, and a resume's repair of a replayed folder
 from __future__ import annotations
 
 import json
-
 import logging
 import os
 import sys
