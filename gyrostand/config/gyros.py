@@ -57,9 +57,16 @@ class GyroSections(Reader):
             ref = find_signal(self.db, msg.name, sig, source=self.dbc_name)
         except CanEdgeError as exc:
             raise self.fail(f"{path}.signal", str(exc)) from None
+        scale = getattr(dbc_msg.get_signal_by_name(ref.name), "scale", 1)
+        if scale == 0:
+            raise self.fail(f"{path}.signal", f"{msg.name}.{sig} has scale 0 in the DBC: "
+                            "every raw value decodes to its offset")
         counter = None
         if m.get("counter") is not None:
             cname = self.string(m["counter"], f"{path}.counter")
+            if cname == sig:
+                raise self.fail(f"{path}.counter", f"{cname} is the channel's own signal, "
+                                "not a rolling counter")
             try:
                 counter = find_signal(self.db, msg.name, cname, source=self.dbc_name)
             except CanEdgeError as exc:

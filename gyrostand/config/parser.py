@@ -279,9 +279,13 @@ class _Parser(GyroSections, SimulateSection):
                 own[ref.key] = f"responses.{key}"
         for i, g in enumerate(gyros):
             if g.result is not None:
-                own[g.result.values.key] = f"gyros[{i}].result.message"
-                if g.result.summary is not None:
-                    own[g.result.summary.key] = f"gyros[{i}].result.summary"
+                for key, ref in (("message", g.result.values), ("summary", g.result.summary)):
+                    if ref is None:
+                        continue
+                    if ref.key in own:  # two gyros' results in one frame: unreadable
+                        raise self.fail(f"gyros[{i}].result.{key}", f"{ref.name} is "
+                                        f"already {own[ref.key]}")
+                    own[ref.key] = f"gyros[{i}].result.{key}"
         for i, g in enumerate(gyros):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
                 where = own.get(c.signal.message.key)

@@ -160,7 +160,7 @@ def test_the_listener_counters_are_the_snapshot_fields():
     assert REASONS == ("unknown_id", "wrong_dlc", "undecodable", "out_of_range",
                        "bad_timestamp", "non_monotonic", "time_jump", "error_frame",
                        "remote_frame", "overflow", "not_available", "invalid",
-                       "second_source")
+                       "second_source", "command_overflow")
     assert list(asdict(Rejections())) == list(REASONS)
 
 

@@ -29,10 +29,11 @@ class Rejections:
     time_jump: int = 0      # timestamp more than max_gap after the previous frame
     error_frame: int = 0
     remote_frame: int = 0
-    overflow: int = 0       # the sample buffer (or command queue) was full
+    overflow: int = 0       # the sample buffer was full
     not_available: int = 0  # every mapped value a VAL_ code (NotAvailable, Error, SNA...)
     invalid: int = 0        # the message's validity signal marked the frame invalid
     second_source: int = 0  # a mapped J1939 PGN from a 2nd source address (not mapped)
+    command_overflow: int = 0  # the command queue was full (a command frame dropped)
 
 
 #: Rejection reasons, in the order of :attr:`DecodeStats.rejected`.
