@@ -146,7 +146,12 @@ def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEst
     finals: list[GyroFinal] = []
     extra: dict[str, list[OnlineEstimate]] = {}
     for g in pipe.cfg.gyros:
-        cols = read_samples_csv(pipe.files.samples.paths[g.name])
+        path = pipe.files.samples.paths[g.name]
+        try:
+            cols = read_samples_csv(path)
+        except OSError as exc:  # e.g. the run folder was removed while the run went on
+            raise OutputError(f"{path}: cannot read the run's samples back: "
+                              f"{exc.strerror or exc}") from exc
         tr = pipe.trackers[g.name]
         tr.finish()
         f = fit_gyro(g, cols, pipe.cfg.sampling.dt,
