@@ -5,9 +5,12 @@ Runs the two Hypothesis properties of the hardening suite once each, at their ow
 decoding listener and the binner; ``tests/hardening/test_commands.py``: 40 sequences of
 command frames through the pipeline), and prints how many examples ran and how many frames
 they held: the figures the issue notes quote. The tests themselves assert the properties;
-the counting lives here (a test that only prints cannot fail).
+the counting lives here (a test that only prints cannot fail). Then the damage counts of
+``benchmarks/damage_counts.py`` (issue 28): frames lost per damaged BLF container, VAL_
+codes, unit variants and a signal storm, through ``gyrostand replay``.
 
-Run: ``.venv/bin/python benchmarks/fuzz_counts.py``
+Run: ``.venv/bin/python benchmarks/fuzz_counts.py`` (output:
+``benchmarks/results/fuzz_counts.txt``)
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from tests.hardening import test_commands, test_fuzz_receive  # noqa: E402
 
@@ -49,7 +53,10 @@ def main() -> None:
     t2 = time.perf_counter()
     print(f"receive fuzz: {rx['n']} examples, {rx['frames']} frames ({t1 - t0:.1f} s)")
     print(f"command property: {cmd['examples']} examples, {cmd['command_frames']} command "
-          f"frames ({t2 - t1:.1f} s)")
+          f"frames ({t2 - t1:.1f} s)", flush=True)
+    import damage_counts
+
+    damage_counts.main()
 
 
 if __name__ == "__main__":

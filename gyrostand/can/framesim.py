@@ -125,7 +125,7 @@ def _streams(channels: ChannelMap, opts: FrameSimOptions) -> list[_Stream]:
 
 
 def _values(truth: Truth, channel: int, tf: np.ndarray, opts: FrameSimOptions,
-            ref: SignalRef) -> np.ndarray:
+            ref: SignalRef, conv=None) -> np.ndarray:
     y = truth.drift if channel == 0 else truth.temp
     if opts.interpolation == "hold":
         idx = np.clip(np.searchsorted(truth.t, tf, side="right") - 1, 0, y.size - 1)
@@ -135,8 +135,15 @@ def _values(truth: Truth, channel: int, tf: np.ndarray, opts: FrameSimOptions,
     q = opts.drift_quantization if channel == 0 else opts.temperature_quantization
     if q > 0:
         v = np.round(v / q) * q
+    if conv is not None:  # the truth is in the session's units, the DBC in its own
+        v = (v - conv.offset) / conv.scale
     lo = -np.inf if ref.minimum is None else ref.minimum
     hi = np.inf if ref.maximum is None else ref.maximum
+    out = (v < lo) | (v > hi)
+    if out.any():  # never silently: the simulated stand saturates what the DBC cannot carry
+        log.warning("simulated %s.%s: %d of %d values outside its DBC range [%g, %g] "
+                    "(%g .. %g), saturated", ref.message.name, ref.name,
+                    int(out.sum()), v.size, lo, hi, float(np.nanmin(v)), float(np.nanmax(v)))
     return np.clip(v, lo, hi)
 
 
@@ -166,7 +173,9 @@ def generate_frames(db: Database, channels: ChannelMap, truths: Sequence[Truth],
         if opts.jitter > 0:
             tf = tf + rng.uniform(-opts.jitter, opts.jitter, n)
         keep = rng.random(n) >= opts.drop if opts.drop > 0 else np.ones(n, bool)
-        cols = [_values(truths[g], c, tf, opts, ref).tolist() for g, c, ref in st.members]
+        cols = [_values(truths[g], c, tf, opts, ref,
+                        channels.convert[g][c] if channels.convert else None).tolist()
+                for g, c, ref in st.members]
         payload_rows.append((cols, j))
         times.append(tf[keep])
         sid.append(np.full(int(keep.sum()), s, dtype=np.int32))

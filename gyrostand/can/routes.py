@@ -19,7 +19,8 @@ except ImportError:  # another cantools: decode_simple is used
 _decode_data: Callable[..., dict] | None = _cantools_decode_data
 
 
-__all__ = ["ChannelMap", "Route", "decoder"]
+__all__ = ["ChannelMap", "Route", "decoder", "checked_decoder", "Dropped", "NotAvailable",
+           "Invalid"]
 
 
 @dataclass(frozen=True)
@@ -33,16 +34,39 @@ class ChannelMap:
     signals: tuple[tuple[SignalRef, SignalRef], ...]
     counters: tuple[tuple[SignalRef | None, SignalRef | None], ...] = ()
     pgn: frozenset[int] = frozenset()
+    #: per gyro and channel: the unit conversion (``Conversion`` or None), the validity
+    #: signal ``(name, values, accept)`` or None, the J1939 source address or None
+    convert: tuple[tuple[Any, Any], ...] = ()
+    valid: tuple[tuple[Any, Any], ...] = ()
+    sources: tuple[tuple[int | None, int | None], ...] = ()
 
     @classmethod
     def from_config(cls, cfg) -> ChannelMap:  # cfg: gyrostand.config.SessionConfig
+        pair = [(g.drift, g.temperature) for g in cfg.gyros]
         return cls(
             gyros=tuple(g.name for g in cfg.gyros),
-            signals=tuple((g.drift.signal, g.temperature.signal) for g in cfg.gyros),
-            counters=tuple((g.drift.counter, g.temperature.counter) for g in cfg.gyros),
-            pgn=frozenset(c.signal.message.key for g in cfg.gyros
-                          for c in (g.drift, g.temperature) if c.match == "pgn"),
+            signals=tuple((d.signal, t.signal) for d, t in pair),
+            counters=tuple((d.counter, t.counter) for d, t in pair),
+            pgn=frozenset(c.signal.message.key for p in pair for c in p if c.match == "pgn"),
+            convert=tuple((getattr(d, "convert", None), getattr(t, "convert", None))
+                          for d, t in pair),
+            valid=tuple((getattr(d, "valid", None), getattr(t, "valid", None))
+                        for d, t in pair),
+            sources=tuple((getattr(d, "source_address", None),
+                           getattr(t, "source_address", None)) for d, t in pair),
         )
+
+
+class Dropped(Exception):  # noqa: N818 (a verdict on a frame, not an error)
+    """A frame the DBC itself says carries no measurement (raised by a checked decoder)."""
+
+
+class NotAvailable(Dropped):
+    """Every mapped value of the frame is a value-table code (not available, error...)."""
+
+
+class Invalid(Dropped):
+    """The frame's validity signal marks it invalid."""
 
 
 class Route:
@@ -50,7 +74,8 @@ class Route:
     length, what it extracts per mapped signal, whether it is the command message, and
     the timestamp of its last accepted frame (s)."""
 
-    __slots__ = ("message", "decode", "length", "extract", "is_command", "last_t")
+    __slots__ = ("message", "decode", "length", "extract", "is_command", "last_t",
+                 "convert", "checked", "codes", "valid")
 
     def __init__(self, message, length: int) -> None:
         self.message = message
@@ -62,6 +87,52 @@ class Route:
                                  tuple[int, int]]] = []
         self.is_command = False
         self.last_t = -math.inf
+        #: signal name -> (scale, offset) into the channel's unit (the array path's too)
+        self.convert: dict[str, tuple[float, float]] = {}
+        #: codes or a validity signal to check (checked_decoder; the array path too)
+        self.checked = False
+        #: mapped signal name -> its VAL_ codes (decoded values); validity signals
+        self.codes: dict[str, frozenset] = {}
+        self.valid: list[tuple[str, frozenset, bool]] = []
+
+
+def checked_decoder(base: Callable[[bytes | bytearray], dict], mapped: list[str],
+                    codes: dict[str, frozenset], valid: list[tuple[str, frozenset, bool]],
+                    convert: dict[str, tuple[float, float]],
+                    dropped: Callable[[int], None]) -> Callable[[bytes | bytearray], dict]:
+    """``base`` with the DBC's verdicts and the units applied: raises :class:`Invalid`
+    when a validity signal ``(name, values, accept)`` says so (its value in ``values``
+    when ``accept`` is False, not in them when True); drops each mapped value that is a
+    code of ``codes`` (calling ``dropped(k)``) and raises :class:`NotAvailable` when no
+    mapped value is left; converts the rest by ``convert`` (``v·scale + offset``).
+    Constant work per frame: one set lookup per code-checked value."""
+    code_items = list(codes.items())
+    conv_items = [(n, s, o) for n, (s, o) in convert.items()]
+
+    def decode(data):
+        values = base(data)
+        for name, vals, accept in valid:
+            x = values.get(name)
+            if x is not None and (x in vals) is not accept:
+                raise Invalid
+        if code_items:
+            k = 0
+            for name, bad in code_items:
+                x = values.get(name)
+                if x is not None and x in bad:
+                    del values[name]
+                    k += 1
+            if k:
+                dropped(k)
+                if all(values.get(n) is None for n in mapped):
+                    raise NotAvailable
+        for name, s, o in conv_items:
+            x = values.get(name)
+            if x is not None:
+                values[name] = x * s + o
+        return values
+
+    return decode
 
 
 def decoder(message) -> Callable[[bytes | bytearray], dict]:

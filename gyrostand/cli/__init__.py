@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import faulthandler
 import importlib
 import logging
@@ -89,6 +90,22 @@ def _gather_globals(args: argparse.Namespace) -> None:
     args.verbose, args.debug, args.quiet = verbose, debug, quiet
 
 
+#: what a write that failed says of the machine, not of the input: a fault (exit 1,
+#: systemd restarts the daemon) rather than bad input (exit 2)
+_FAULT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO,
+                           errno.ENOENT, errno.ESTALE})
+
+
+def _is_fault(exc: BaseException) -> bool:
+    """True for an :class:`~gyrostand.errors.OutputError` caused by a full disk, a file
+    too large, an I/O error or a run folder removed while written."""
+    from ..errors import OutputError
+
+    cause = exc.__cause__
+    return (isinstance(exc, OutputError) and isinstance(cause, OSError)
+            and cause.errno in _FAULT_ERRNOS)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; progress output is on for its duration only (an in-process call,
     e.g. from a test or a script, leaves the library silent afterwards)."""
@@ -136,7 +153,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if _is_fault(exc) else 2
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early
         sys.stderr.close()
         return 0

@@ -31,12 +31,29 @@ def program_document(program, limits) -> dict[str, Any]:
 BYTES_PER_SAMPLE = 400
 
 
+#: the hottest chamber the design command plans for (°C)
+MAX_CHAMBER_C = 1000.0
+
+
 def limits_of(args: argparse.Namespace, hours: float):
     """The chamber limits of the command line (°C/min and min converted to SI). Raises
     :class:`~gyrostand.errors.ModelError` when the program's time grid could not fit in the
     memory available (checked before anything is allocated)."""
     from ..core.design.search import ChamberLimits
+    from ..errors import ModelError
 
+    for opt, v in (("--t-min", args.t_min), ("--t-max", args.t_max),
+                   ("--start", args.start)):
+        if v is not None and not -273.15 <= v <= MAX_CHAMBER_C:
+            raise ModelError(f"{opt} {v:g}: a chamber temperature is between -273.15 and "
+                             f"{MAX_CHAMBER_C:g} °C")
+    if not args.t_min < args.t_max:
+        raise ModelError(f"--t-min {args.t_min:g} must be below --t-max {args.t_max:g}")
+    if args.start is not None and not args.t_min <= args.start <= args.t_max:
+        raise ModelError(f"--start {args.start:g} is outside --t-min .. --t-max "
+                         f"({args.t_min:g} .. {args.t_max:g} °C)")
+    if not 1 <= args.legs <= 1000:
+        raise ModelError(f"--legs {args.legs}: expected 1 .. 1000")
     limits = ChamberLimits(args.t_min, args.t_max, args.max_rate / 60.0,
                            args.min_soak * 60.0, hours * 3600.0, legs=args.legs,
                            lag=args.lag * 60.0, start=args.start)

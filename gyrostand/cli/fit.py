@@ -27,9 +27,17 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..errors import ModelError
     from ..report.views import FitStepView
     from ..workbench import run_fit
 
+    for opt, names in (("--add", args.add), ("--remove", args.remove)):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:  # a ledger step records each change once
+            raise ModelError(f"{opt} {twice[0]} is given {names.count(twice[0])} times")
+    both = sorted(set(args.add) & set(args.remove))
+    if both:
+        raise ModelError(f"{both[0]} is both added (--add) and removed (--remove)")
     if len(args.run) > 1:
         from ..workbench.joint import run_joint_fit
 

@@ -90,6 +90,17 @@ def run(args: argparse.Namespace) -> int:
         for o in outcomes:
             emit(RunSummary(o, {}), args.format, sys.stdout)
     empty = [why for o in outcomes if (why := decoded_nothing(o, cfg, "replay"))]
+    for o in outcomes:  # two J1939 devices on one mapping: not one gyro's data
+        n = o.stats["decoder"].get("rejected", {}).get("second_source", 0)
+        if n:
+            empty.append(f"{o.run_dir}: {n} frames of a `match: pgn` message came from a "
+                         "second J1939 source address and were not decoded (run.log names "
+                         "the ids); map each device with source_address: on its channels")
     for why in empty:  # bad input: the logs hold nothing of this session's messages
         print(f"error: {why}", file=sys.stderr)
-    return 2 if empty else 0
+    if empty:
+        return 2
+    faults = [o for o in outcomes if not o.ok]
+    for o in faults:  # e.g. the disk filled: a fault, named with its folder
+        print(f"error: {o.run_dir}: {o.stop_reason}", file=sys.stderr)
+    return 1 if faults else 0

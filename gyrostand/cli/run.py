@@ -90,7 +90,8 @@ def describe_session(cfg: SessionConfig) -> str:
              "  bus (not opened; after each key, where it came from):",
              *(f"    {line}" for line in bus.describe()),
              f"  dbc: {cfg.dbc_path} ({len(cfg.db.messages)} messages)",
-             f"  sampling: dt {cfg.sampling.dt:g} s; runs under {cfg.output}"]
+             f"  sampling: dt {cfg.sampling.dt:g} s; drift in {cfg.drift_unit}; runs under "
+             f"{cfg.output}"]
     for g in cfg.gyros:
         lines.append(f"  gyro {g.name}: model {','.join(g.model)}; identifiers "
                      f"{','.join(g.identifiers)}")
@@ -100,8 +101,17 @@ def describe_session(cfg: SessionConfig) -> str:
                 if s.multiplexer else ""
             cnt = f", counter {ch.counter.name}" if ch.counter else ""
             cnt += ", matched by J1939 PGN" if ch.match == "pgn" else ""
+            if ch.source_address is not None:
+                cnt += f" from source address 0x{ch.source_address:02X}"
             lines.append(f"    {role:<12} {s.message.describe()}.{s.name} "
                          f"[{s.unit or 'no unit'}]{mux}{cnt}")
+            if ch.convert is not None:
+                lines.append(f"    {'':<12} converted {ch.convert.describe()}")
+            if ch.valid is not None:
+                name, vals, accept = ch.valid
+                which = "unless" if accept else "when"
+                lines.append(f"    {'':<12} frames dropped {which} {name} in "
+                             f"{{{', '.join(f'{v:g}' for v in sorted(vals))}}}")
         if g.result is not None:
             summ = f", summary {g.result.summary.describe()}" if g.result.summary else ""
             lines.append(f"    results      {g.result.values.describe()}{summ}")

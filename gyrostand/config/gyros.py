@@ -8,6 +8,8 @@ from types import MappingProxyType
 from typing import Any
 
 from gyrostand.can.dbc import find_signal
+from gyrostand.can.units import Conversion, UnitError, rate_conversion, temperature_conversion
+from gyrostand.can.validity import status_signals
 from gyrostand.core import registry
 from gyrostand.core.names import LKF_VARIANTS
 from gyrostand.errors import CanEdgeError
@@ -24,6 +26,7 @@ from .schema import (
     GyroConfig,
     LkfConfig,
     ResultConfig,
+    kind_of,
     log,
 )
 
@@ -31,8 +34,9 @@ from .schema import (
 class GyroSections(Reader):
     """Mixin of :class:`~gyrostand.config.parser.Parser`: the ``gyros:`` entries."""
 
-    def channel(self, value: Any, path: str) -> ChannelConfig:
-        m = self.mapping(value, path, ("message", "signal"), ("extended", "counter", "match"))
+    def channel(self, value: Any, path: str, role: str = "drift") -> ChannelConfig:
+        m = self.mapping(value, path, ("message", "signal"),
+                         ("extended", "counter", "match", "unit", "valid", "source_address"))
         ext = self.boolean(m.get("extended"), f"{path}.extended")
         msg = self.message({"message": m["message"], "extended": ext}, path)
         match = m.get("match", self.match)
@@ -53,14 +57,71 @@ class GyroSections(Reader):
             ref = find_signal(self.db, msg.name, sig, source=self.dbc_name)
         except CanEdgeError as exc:
             raise self.fail(f"{path}.signal", str(exc)) from None
+        scale = getattr(dbc_msg.get_signal_by_name(ref.name), "scale", 1)
+        if scale == 0:
+            raise self.fail(f"{path}.signal", f"{msg.name}.{sig} has scale 0 in the DBC: "
+                            "every raw value decodes to its offset")
         counter = None
         if m.get("counter") is not None:
             cname = self.string(m["counter"], f"{path}.counter")
+            if cname == sig:
+                raise self.fail(f"{path}.counter", f"{cname} is the channel's own signal, "
+                                "not a rolling counter")
             try:
                 counter = find_signal(self.db, msg.name, cname, source=self.dbc_name)
             except CanEdgeError as exc:
                 raise self.fail(f"{path}.counter", str(exc)) from None
-        return ChannelConfig(ref, counter, match)
+        convert = self.channel_unit(m, path, role, ref)
+        valid = self.validity(m.get("valid"), f"{path}.valid", dbc_msg, ref,
+                              counter.name if counter else None)
+        sa = None
+        if m.get("source_address") is not None:
+            if match != "pgn":
+                raise self.fail(f"{path}.source_address", "needs match: pgn (a full id "
+                                "already names its source address)")
+            sa = self.integer(m["source_address"], f"{path}.source_address", 0, 0xFF)
+        unit = convert.target if convert is not None else (m.get("unit") or ref.unit)
+        return ChannelConfig(ref, counter, match, convert, valid, sa, str(unit))
+
+    def channel_unit(self, m: Mapping, path: str, role: str, ref) -> Conversion | None:
+        """The conversion of the channel's values to °C / the session's drift unit, from
+        the DBC signal's unit (or the channel's ``unit:``, which overrides it); a unit
+        the project cannot convert is an error naming the key path."""
+        where = f"{path}.unit" if m.get("unit") is not None else f"{path}.signal"
+        unit = ref.unit if m.get("unit") is None else self.string(m["unit"], where)
+        if not unit.strip():
+            log.warning("%s: %s: %s.%s has no unit in the DBC: taken as %s (say `unit:` "
+                        "to be sure)", self.source, path, ref.message.name, ref.name,
+                        "degC" if role == "temperature" else self.drift_unit)
+        try:
+            if role == "temperature":
+                return temperature_conversion(unit)
+            return rate_conversion(unit, self.drift_unit)
+        except UnitError as exc:
+            raise self.fail(where, f"{ref.message.name}.{ref.name}: {exc}") from None
+
+    def validity(self, value: Any, path: str, dbc_msg, ref, counter: str | None
+                 ) -> tuple[str, frozenset, bool] | None:
+        """``valid: {signal: NAME, accept: [values]}``: frames whose NAME (a signal of
+        the same message) is not one of ``accept`` are dropped; without it, the
+        message's own validity signal (status/valid/qualifier with a value table naming
+        an invalid state) drops the frames in such a state."""
+        if value is None:
+            found = status_signals(dbc_msg, [ref.name] + ([counter] if counter else []))
+            if not found:
+                return None
+            name, bad = found[0]
+            return (name, bad, False)
+        v = self.mapping(value, path, ("signal", "accept"), ())
+        name = self.string(v["signal"], f"{path}.signal")
+        if name not in {s.name for s in dbc_msg.signals}:
+            raise self.fail(f"{path}.signal", f"{dbc_msg.name} has no signal {name!r}")
+        acc = v["accept"]
+        if not isinstance(acc, list) or not acc:
+            raise self.fail(f"{path}.accept", f"expected a non-empty list of values, got "
+                                              f"{kind_of(acc)}")
+        vals = frozenset(self.number(x, f"{path}.accept[{i}]") for i, x in enumerate(acc))
+        return (name, vals, True)
 
     def gyro(self, value: Any, path: str) -> GyroConfig:
         m = self.mapping(value, path, ("name", "drift", "temperature", "model"),
@@ -68,8 +129,8 @@ class GyroSections(Reader):
         name = self.string(m["name"], f"{path}.name")
         if not NAME_RE.match(name):
             raise self.fail(f"{path}.name", f"{name!r}: use letters, digits, '_', '-', '.'")
-        drift = self.channel(m["drift"], f"{path}.drift")
-        temp = self.channel(m["temperature"], f"{path}.temperature")
+        drift = self.channel(m["drift"], f"{path}.drift", "drift")
+        temp = self.channel(m["temperature"], f"{path}.temperature", "temperature")
         model = self.names(m["model"], f"{path}.model", self.terms)
         core_model = self.model_of(model, f"{path}.model")
         idents = self.names(m.get("identifiers", ["lkf", "lsq"]), f"{path}.identifiers",
@@ -166,10 +227,11 @@ class GyroSections(Reader):
     def check_channel_clashes(self, gyros: tuple[GyroConfig, ...]) -> None:
         """A drift signal belongs to one gyro; a temperature signal may serve several (one
         sensor on a multi-axis IMU's board), but never also as a drift."""
-        owner: dict[tuple[int, str], tuple[str, str]] = {}
+        owner: dict[tuple[int, str, int | None], tuple[str, str]] = {}
         for i, g in enumerate(gyros):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
-                key = (c.signal.message.key, c.signal.name)
+                # one J1939 device per source address: the same signal of another is free
+                key = (c.signal.message.key, c.signal.name, c.source_address)
                 path = f"gyros[{i}].{ch}.signal"
                 if key in owner and (ch == "drift" or owner[key][1] == "drift"):
                     raise self.fail(path, f"{c.signal.message.name}.{c.signal.name} is already "
@@ -180,8 +242,12 @@ class GyroSections(Reader):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
                 k = c.signal.message.key
                 path = f"gyros[{i}].{ch}.match"
-                if k in keys and keys[k][1] != c.match:
-                    raise self.fail(path, f"{c.signal.message.name} is matched by "
-                                          f"{keys[k][1]} at {keys[k][0]}")
-                keys.setdefault(k, (path, c.match))
+                how = c.match + (" with source_address" if c.source_address is not None
+                                 else "")
+                if k in keys and keys[k][1] != how:
+                    where = path if c.match != keys[k][1].split()[0] else \
+                        f"gyros[{i}].{ch}.source_address"
+                    raise self.fail(where, f"{c.signal.message.name} is matched by "
+                                           f"{keys[k][1]} at {keys[k][0]}")
+                keys.setdefault(k, (path, how))
 

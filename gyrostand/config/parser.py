@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -10,6 +11,7 @@ from typing import Any
 import yaml
 
 from gyrostand.can.dbc import MessageRef, load_dbc
+from gyrostand.can.units import DEFAULT_DRIFT_UNIT, UnitError, rate_conversion
 from gyrostand.errors import CanEdgeError, ConfigError
 from gyrostand.runfolder.layout import DATA_FORMATS
 
@@ -128,7 +130,7 @@ class _Parser(GyroSections, SimulateSection):
         if self.match not in MATCHES:
             raise self.fail("match", f"{self.match!r} is not one of: {', '.join(MATCHES)}")
         sess = self.mapping(top["session"], "session", ("name",),
-                            ("output", "fsync", "formats"))
+                            ("output", "fsync", "formats", "drift_unit"))
         name = self.string(sess["name"], "session.name")
         if not NAME_RE.match(name):
             raise self.fail("session.name", f"{name!r}: use letters, digits, '_', '-', '.'")
@@ -140,6 +142,14 @@ class _Parser(GyroSections, SimulateSection):
             missing = missing_packages(formats)
             if missing:
                 raise self.fail("session.formats", missing)
+        # session.drift_unit; left out: the drift signals' own unit when they share one
+        # (no conversion), else deg/h (decided once the gyros are read)
+        self.drift_unit = self.string(sess.get("drift_unit", DEFAULT_DRIFT_UNIT),
+                                      "session.drift_unit")
+        try:
+            rate_conversion(self.drift_unit, self.drift_unit)
+        except UnitError as exc:
+            raise self.fail("session.drift_unit", str(exc)) from None
         bus = self.bus(top["bus"])
         self.dbc_name = self.string(top["dbc"], "dbc")
         dbc_path = (self.base / self.dbc_name).resolve()
@@ -153,6 +163,8 @@ class _Parser(GyroSections, SimulateSection):
         if not isinstance(gyros_raw, list) or not gyros_raw:
             raise self.fail("gyros", f"expected a non-empty list, got {kind_of(gyros_raw)}")
         gyros = tuple(self.gyro(g, f"gyros[{i}]") for i, g in enumerate(gyros_raw))
+        if "drift_unit" not in sess:
+            gyros = self.common_drift_unit(gyros)
         seen: dict[str, int] = {}
         for i, g in enumerate(gyros):
             if g.name in seen:
@@ -164,13 +176,44 @@ class _Parser(GyroSections, SimulateSection):
         simulate = None
         if top.get("simulate") is not None:
             simulate = self.simulate(top["simulate"], [g.name for g in gyros])
+            self.check_profile_range(simulate.temperature, gyros)
         reconnect = self.reconnect(top.get("reconnect") or {})
         return SessionConfig(
             path=Path(self.source), name=name, output=output, fsync=fsync, formats=formats,
             bus=MappingProxyType(dict(bus)), dbc_path=dbc_path, sampling=sampling,
             gyros=gyros, responses=responses, simulate=simulate, db=self.db,
-            reconnect=reconnect,
+            reconnect=reconnect, drift_unit=self.drift_unit,
         )
+
+    def common_drift_unit(self, gyros: tuple[GyroConfig, ...]) -> tuple[GyroConfig, ...]:
+        """Without ``session.drift_unit``: the drift signals' unit when every one has the
+        same (known) unit, so nothing is converted; else deg/h, each converted."""
+        units = {(g.drift.convert.source if g.drift.convert else g.drift.signal.unit)
+                 for g in gyros}
+        units.discard("")
+        if len(units) != 1:
+            return gyros
+        (unit,) = units
+        self.drift_unit = unit
+        return tuple(dataclasses.replace(g, drift=dataclasses.replace(
+            g.drift, convert=None, unit=unit))
+                     for g in gyros)
+
+    def check_profile_range(self, points, gyros: tuple[GyroConfig, ...]) -> None:
+        """A simulated temperature the DBC signal cannot carry would be saturated at its
+        range without a word: refused, naming the breakpoint and the range (°C)."""
+        for g in gyros:
+            ch = g.temperature
+            lo, hi = ch.signal.minimum, ch.signal.maximum
+            if ch.convert is not None:
+                lo = None if lo is None else ch.convert(lo)
+                hi = None if hi is None else ch.convert(hi)
+            for i, (_, temp) in enumerate(points):
+                if (lo is not None and temp < lo) or (hi is not None and temp > hi):
+                    raise self.fail(f"simulate.temperature[{i}]", f"{temp:g} degC is outside "
+                                    f"the range of {ch.signal.message.name}."
+                                    f"{ch.signal.name} ({lo:g} .. {hi:g} degC): the "
+                                    "simulated stand would saturate it")
 
     def bus(self, value: Any) -> dict[str, Any]:
         """``bus:``, the ``can.Bus`` arguments: a mapping, maybe empty (``bus: {}``; a key
@@ -243,9 +286,13 @@ class _Parser(GyroSections, SimulateSection):
                 own[ref.key] = f"responses.{key}"
         for i, g in enumerate(gyros):
             if g.result is not None:
-                own[g.result.values.key] = f"gyros[{i}].result.message"
-                if g.result.summary is not None:
-                    own[g.result.summary.key] = f"gyros[{i}].result.summary"
+                for key, ref in (("message", g.result.values), ("summary", g.result.summary)):
+                    if ref is None:
+                        continue
+                    if ref.key in own:  # two gyros' results in one frame: unreadable
+                        raise self.fail(f"gyros[{i}].result.{key}", f"{ref.name} is "
+                                        f"already {own[ref.key]}")
+                    own[ref.key] = f"gyros[{i}].result.{key}"
         for i, g in enumerate(gyros):
             for ch, c in (("drift", g.drift), ("temperature", g.temperature)):
                 where = own.get(c.signal.message.key)

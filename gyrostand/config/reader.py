@@ -5,6 +5,7 @@ with a :class:`~gyrostand.errors.ConfigError` naming the file and the path. The 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,9 @@ from .schema import (
     kind_of,
 )
 
+#: a number YAML 1.1 leaves a string (``1e0``, ``5E-3``: an exponent without a dot)
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
 
 class Reader:
     """What every section of the parser reads with, and the state they share: the
@@ -34,6 +38,7 @@ class Reader:
         self.dt = 1.0  # sampling.dt once parsed (bounds of rates given in 1/s)
         self.terms: tuple[str, ...] = MODEL_TERMS  # + plugin terms once loaded
         self.match = "id"  # the session's default channel `match` once parsed
+        self.drift_unit = "deg/h"  # session.drift_unit once parsed
 
     # -- helpers ---------------------------------------------------------------------
     def fail(self, path: str, msg: str) -> ConfigError:
@@ -55,6 +60,8 @@ class Reader:
 
     def number(self, value: Any, path: str, *, lo: float | None = None,
                hi: float | None = None, lo_open: bool = False) -> float:
+        if isinstance(value, str) and _NUMBER.fullmatch(value.strip()):
+            value = float(value)  # YAML 1.1 reads 1e0 (an exponent, no dot) as a string
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(path, f"expected a number, got {kind_of(value)}")
         try:

@@ -11,6 +11,7 @@ from typing import Any
 
 from gyrostand.can.dbc import MessageRef, SignalRef
 from gyrostand.can.framesim import FrameSimOptions
+from gyrostand.can.units import Conversion
 from gyrostand.core import registry
 from gyrostand.core.names import VOCABULARY
 from gyrostand.core.options import LkfOptions
@@ -55,6 +56,16 @@ class ChannelConfig:
     #: "id": frames match on the full id; "pgn": J1939, on the PGN whatever the priority
     #: and source address (extended ids only)
     match: str = "id"
+    #: the decoded value into the channel's unit (°C, the session's drift unit); None: the
+    #: DBC's unit already is it (the samples are the decoded values, to the bit)
+    convert: Conversion | None = None
+    #: a validity/status signal of the same message: (signal name, raw values, accept):
+    #: a frame whose value is in the set is dropped (accept False) or kept (accept True)
+    valid: tuple[str, frozenset[float], bool] | None = None
+    #: J1939 source address this channel's device sends from (``match: pgn``); None: any
+    source_address: int | None = None
+    #: the unit of the channel's samples: the DBC's, or the one it is converted to
+    unit: str = ""
 
 
 @dataclass(frozen=True)
@@ -177,6 +188,9 @@ class SessionConfig:
     #: formats written beside the CSVs at the run's end (``session.formats``; of
     #: :data:`gyrostand.runfolder.layout.DATA_FORMATS`)
     formats: tuple[str, ...] = ()
+    #: the unit every drift is binned in (``session.drift_unit``); DBC signals in another
+    #: angular-rate unit are converted at decode time (:mod:`gyrostand.can.units`)
+    drift_unit: str = "deg/h"
     #: where each key of ``bus`` came from (``session file``, ``command line``, ``env
     #: CAN_CHANNEL``, ``python-can config ~/.canrc``; :mod:`gyrostand.can.busconfig`);
     #: empty until the command line resolves the bus (then: every key of ``bus``)

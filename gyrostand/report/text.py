@@ -310,7 +310,9 @@ def run_summary(view: RunSummary) -> str:
         lines.append(result_table(f, view.truths.get(f.gyro)))
     lines.append(f"\nrun folder: {outcome.run_dir}")
     for label, path in (("result:    ", outcome.result_json), ("report:    ", outcome.report)):
-        lines.append(f"{label} {path}" if path.is_file() else f"{label} not written")
+        lines.append(f"{label} {path}" if path.is_file() and (
+            path != outcome.result_json or getattr(outcome, "result_written", True))
+            else f"{label} not written")
     for err in outcome.stats.get("unwritten", []):
         lines.append(f"error: {err}")
     return "\n".join(lines)

@@ -165,7 +165,8 @@ class RunSummary:
     def to_dict(self) -> dict[str, Any]:
         o = self.outcome
         return {"stop_reason": o.stop_reason, "state": o.state, "run_dir": str(o.run_dir),
-                "result": str(o.result_json) if o.result_json.is_file() else None,
+                "result": str(o.result_json) if o.result_json.is_file()
+                and getattr(o, "result_written", True) else None,
                 "report": str(o.report) if o.report.is_file() else None,
                 "gyros": {f.gyro: f.to_dict() for f in o.finals},
                 "stats": json_safe(o.stats), "unwritten": list(o.stats.get("unwritten", []))}

@@ -167,13 +167,24 @@ class SegmentLog:
         return total
 
 
+class _RunLogHandler(logging.FileHandler):
+    """``run.log``'s handler: a record it cannot write (a full disk) is dropped and
+    counted (``failed``), never a "--- Logging error ---" traceback on stderr; the
+    console handler still shows every record."""
+
+    failed = 0
+
+    def handleError(self, record: logging.LogRecord) -> None:  # noqa: N802 (logging's)
+        self.failed += 1
+
+
 class RunLog:
     """Attach a ``run.log`` file handler to the ``gyrostand`` logger for one run (INFO and
     above, with wall-clock times); :meth:`close` detaches it."""
 
     def __init__(self, run_dir: Path, level: int = logging.INFO) -> None:
         self.path = run_dir / RUN_LOG
-        self.handler = logging.FileHandler(self.path, encoding="utf-8")
+        self.handler = _RunLogHandler(self.path, encoding="utf-8")
         self.handler.setLevel(level)
         self.handler.setFormatter(logging.Formatter(
             "%(asctime)s %(levelname)s %(name)s: %(message)s"))
@@ -186,4 +197,7 @@ class RunLog:
     def close(self) -> None:
         self.logger.removeHandler(self.handler)
         self.logger.setLevel(self._old_level)
-        self.handler.close()
+        try:
+            self.handler.close()
+        except OSError:  # its last lines cannot be flushed (a full disk): they are lost
+            pass

@@ -71,7 +71,7 @@ def _units(run_dir: Path, info: dict[str, Any], gyro: str) -> tuple[str, str]:
         from ..config import load_config
 
         g = load_config(Path(info["config"])).gyro(gyro)
-        return g.drift.signal.unit or "y", g.temperature.signal.unit or "degC"
+        return g.drift.unit or "y", g.temperature.unit or "degC"
     except Exception as exc:  # moved or changed session file: generic units
         log.info("%s: units of gyro %s unknown (%s): y, degC", run_dir, gyro, exc)
         return "y", "degC"

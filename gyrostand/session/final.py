@@ -125,7 +125,7 @@ def fit_gyro(gyro: GyroConfig, cols: Mapping[str, Sequence[float]], dt: float, s
     gaps = sum(1 for a, b in zip(cols["n_drift"], cols["n_temp"], strict=True)
                if a == 0 or b == 0)
     out = GyroFinal(gyro.name, model, math.nan, n, gaps, 0, online=list(online),
-                    unit=gyro.drift.signal.unit or "y")
+                    unit=gyro.drift.unit or "y")
     if not n:
         for m in final_methods(gyro):
             out.fits[m] = "no bins were recorded for this gyro"
@@ -162,8 +162,24 @@ def write_result_json(path: Path, cfg: SessionConfig, source: str, run_dir: Path
     doc = {"session": cfg.name, "config": str(cfg.path), "source": source,
            "run_dir": str(run_dir), "dt": cfg.sampling.dt,
            "epoch": cfg.sampling.epoch, "state": "finished",
-           "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": json_safe(stats)}
+           "gyros": {f.gyro: f.to_dict() for f in finals}, "stats": json_safe(stats),
+           "channels": channels_of(cfg)}
     write_json(path, doc)
+
+
+def channels_of(cfg: SessionConfig) -> dict[str, dict[str, str]]:
+    """What each gyro's channels map, as ``result.json`` records it (``run --resume``
+    refuses a session that maps another message, signal, id or source address)."""
+    out = {}
+    for g in cfg.gyros:
+        d = {}
+        for role, ch in (("drift", g.drift), ("temperature", g.temperature)):
+            s = ch.signal
+            sa = "" if ch.source_address is None else f" from 0x{ch.source_address:02X}"
+            how = " by PGN" if ch.match == "pgn" else ""
+            d[role] = f"{s.message.describe()}.{s.name}{how}{sa} in {ch.unit or 'no unit'}"
+        out[g.name] = d
+    return out
 
 
 def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
@@ -176,7 +192,7 @@ def write_provisional_result(path: Path, cfg: SessionConfig, source: str,
            "epoch": cfg.sampling.epoch, "state": "running",
            "gyros": {g.name: {"model": list(g.model), "t0": None, "bins": 0, "gaps": 0,
                               "observed": 0, "fits": {}, "online": {}} for g in cfg.gyros},
-           "stats": {"stop_reason": None}}
+           "stats": {"stop_reason": None}, "channels": channels_of(cfg)}
     write_json(path, doc, allow_nan=True)
 
 

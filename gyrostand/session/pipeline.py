@@ -27,6 +27,7 @@ writes the provisional ``result.json`` and, resuming, feeds the kept bins again.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import time
@@ -122,6 +123,10 @@ class Pipeline:
             actions={"reset": self._reset, "snapshot": self.snapshot},
             command_name=self._command_name)
         self.outages = 0
+        # (frame time, order, reset None | identifying) of commands not yet applied to bins
+        self._events: list[tuple[float, int, bool | None]] = []
+        self._seq = 0
+        self._identifying = self.protocol.identifying  # of the bins being written
         self.resumed: dict[str, int] = {}
         self.step_ms: deque[float] = deque(maxlen=86_400)  # worker ms per step with bins
 
@@ -136,6 +141,9 @@ class Pipeline:
         if st is not None:
             if st.t0 is not None:
                 self.binner.resume_after(st.t0, st.last_k(self.cfg.sampling.dt))
+                last = [c["t"][-1] for c in st.columns.values() if c["t"]]
+                if last:  # frames are timed as after the kept bins: a clock that went
+                    self.listener.resume_after(max(last))  # back re-anchors, as live
             self.resumed = self.files.resume(st)
             log.info("resumed with %s kept bins per gyro", self.resumed)
         self.responses.start()
@@ -191,13 +199,36 @@ class Pipeline:
             self.segments.update(self.counts())
 
     def step(self, bins: Sequence[Bin]) -> None:
-        """Process closed bins, send due frames, handle commands (see module doc)."""
+        """Handle commands, process closed bins, send due frames (see module doc).
+
+        Commands come first, and what they change for the bins takes effect at the bin
+        that contains their frame time t, whichever step that bin closes in: a ``reset``
+        restarts the online identifiers, a ``start`` begins identifying, before that bin.
+        So a replay of the raw log applies them at the same bins as the live run did
+        (live, bins close in small batches; a replay closes many at once)."""
+        self._commands()
         if bins:
             t_start = time.perf_counter()
-            self.files.write(bins, self.protocol.identifying)
-            self.responses.bins_closed(max(b.t for b in bins) + self.cfg.sampling.dt)
+            dt = self.cfg.sampling.dt
+            part: list[Bin] = []
+            ev = self._events
+            for b in bins:
+                if ev and ev[0][0] < b.t + dt:
+                    if part:
+                        self.files.write(part, self._identifying)
+                        part = []
+                    while ev and ev[0][0] < b.t + dt:
+                        _, _, what = ev.pop(0)
+                        if what is None:  # reset
+                            for tr in self.trackers.values():
+                                tr.reset()
+                        else:
+                            self._identifying = what
+                part.append(b)
+            if part:
+                self.files.write(part, self._identifying)
+            self.responses.bins_closed(max(b.t for b in bins) + dt)
             self.step_ms.append((time.perf_counter() - t_start) * 1e3)
-        self._commands()
         t = self.responses.beat_due()
         if t is not None:
             self.heartbeat(t)
@@ -222,7 +253,10 @@ class Pipeline:
     def _commands(self) -> None:
         for t, values in self.listener.pop_commands():
             try:
+                before = self.protocol.identifying
                 ack = self.protocol.handle(t, values)
+                if self.protocol.identifying != before:
+                    self._event(t, self.protocol.identifying)
                 if ack is not None:
                     self.responses.ack(ack)
             except GyrostandError as exc:  # a failing snapshot must not end the run
@@ -236,10 +270,16 @@ class Pipeline:
             return COMMANDS.get(code)
         return self.encoder.command_name(ref, code)
 
-    def _reset(self, _t: float) -> None:
-        """``reset``: the online identifiers restart at the next bin."""
-        for tr in self.trackers.values():
-            tr.reset()
+    def _reset(self, t: float) -> None:
+        """``reset`` at frame time ``t``: the online identifiers restart before the bin
+        that contains ``t`` (:meth:`step`)."""
+        self._event(t, None)
+
+    def _event(self, t: float, what: bool | None) -> None:
+        """What a command changes for the bins, at frame time ``t``: a reset (None) or
+        whether bins are identified from then on; applied by :meth:`step`."""
+        self._seq += 1
+        bisect.insort(self._events, (t, self._seq, what))
 
     def snapshot(self, t: float) -> Path:
         """Flush the files and write ``snapshot.json`` (current online estimates), then

@@ -42,6 +42,7 @@ from ..runfolder import (
     read_samples_csv,
     samples_path,
 )
+from .final import channels_of
 from .online import ONLINE
 
 __all__ = ["ResumeState", "prepare_resume", "find_resume_dir", "check_compatible"]
@@ -99,6 +100,24 @@ def check_compatible(cfg: SessionConfig, run_dir: Path) -> None:
     if doc is None:
         log.warning("%s: unreadable; resuming without comparing dt and epoch", rp)
     if isinstance(doc, dict):
+        source = doc.get("source")
+        if isinstance(source, str) and source != "live":
+            raise ConfigError(f"{run_dir}: a folder of a {source!r}, not of a live run: "
+                              f"--resume continues a live run's folder (its raw log is the "
+                              f"bus's); replay the logs again instead")
+        was_ch = doc.get("channels")
+        if isinstance(was_ch, dict):
+            now = channels_of(cfg)
+            for i, g in enumerate(cfg.gyros):
+                old = was_ch.get(g.name)
+                for role in ("drift", "temperature"):
+                    if isinstance(old, dict) and old.get(role) not in (None,
+                                                                       now[g.name][role]):
+                        raise ConfigError(
+                            f"{src}: gyros[{i}].{role}: {now[g.name][role]} differs from "
+                            f"the run folder's {old[role]} ({rp}): two sensors would be "
+                            "mixed in one samples.csv; resume with the session it was "
+                            "started with")
         dt = doc.get("dt")
         if isinstance(dt, (int, float)) and not isinstance(dt, bool) and \
                 float(dt) != cfg.sampling.dt:

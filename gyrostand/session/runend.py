@@ -74,6 +74,9 @@ class RunOutcome:
     stop_reason: str
     state: str
     stats: dict[str, Any] = field(default_factory=dict)
+    #: the final result.json was written (else the file, if any, is the provisional
+    #: one of a running run: not this run's result)
+    result_written: bool = True
 
     @property
     def ok(self) -> bool:
@@ -119,8 +122,10 @@ def finish_run(pipe: Ending, reason: str, *, extra_stats: dict[str, Any] | None 
     result = pipe.run_dir / RESULT
     report = pipe.run_dir / REPORT
     stats["unwritten"] = unwritten
+    before = len(unwritten)
     attempt(lambda: write_result_json(result, pipe.cfg, pipe.source, pipe.run_dir,
                                       finals, stats))
+    result_written = len(unwritten) == before  # else result.json is the provisional one
     attempt(lambda: write_report(report, pipe.cfg, pipe.source, finals, stats,
                                  truths or {}))
     if pipe.cfg.formats:  # Parquet/MF4 beside the CSVs, from the files as committed
@@ -131,7 +136,8 @@ def finish_run(pipe: Ending, reason: str, *, extra_stats: dict[str, Any] | None 
         state, reason = FAULT, f"{reason}; {unwritten[0]}"
         stats["stop_reason"] = reason
     log.info("run finished (%s): %s, %s", reason, result, report)
-    return RunOutcome(pipe.run_dir, result, report, finals, reason, state, stats)
+    return RunOutcome(pipe.run_dir, result, report, finals, reason, state, stats,
+                      result_written=result_written)
 
 
 def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEstimate]]]:
@@ -140,7 +146,12 @@ def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEst
     finals: list[GyroFinal] = []
     extra: dict[str, list[OnlineEstimate]] = {}
     for g in pipe.cfg.gyros:
-        cols = read_samples_csv(pipe.files.samples.paths[g.name])
+        path = pipe.files.samples.paths[g.name]
+        try:
+            cols = read_samples_csv(path)
+        except OSError as exc:  # e.g. the run folder was removed while the run went on
+            raise OutputError(f"{path}: cannot read the run's samples back: "
+                              f"{exc.strerror or exc}") from exc
         tr = pipe.trackers[g.name]
         tr.finish()
         f = fit_gyro(g, cols, pipe.cfg.sampling.dt,

@@ -37,9 +37,15 @@ from gyrostand.can.survey import (
     daemon_frame_ids,
     dump_dbc,
     survey,
-    temperature_unit,
     with_daemon_frames,
 )
+from gyrostand.can.units import (
+    DEFAULT_DRIFT_UNIT,
+    UnitError,
+    rate_conversion,
+    temperature_conversion,
+)
+from gyrostand.can.validity import is_code_name, status_signals
 from gyrostand.errors import ConfigError
 
 __all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus",
@@ -95,10 +101,47 @@ def _match_results(gyros: list[GyroProposal], names: list[str]) -> dict[str, str
     return out
 
 
-def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str) -> str:
+def _channel_line(key: str, s: SignalInfo, counter: str | None, ref: str, db: Any) -> str:
     counter_part = f", counter: {_yaml_str(counter)}" if counter else ""
     match = ", match: pgn" if s.j1939 else ""  # any priority and source address
-    return f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}{match}}}"
+    valid = ""
+    v = _validity(s, counter, db)
+    if v is not None:
+        valid = f", valid: {{signal: {_yaml_str(v[0])}, accept: [{', '.join(v[1])}]}}"
+    return (f"    {key}: {{message: {ref}, signal: {_yaml_str(s.signal)}{counter_part}{match}"
+            f"{valid}}}")
+
+
+def _validity(s: SignalInfo, counter: str | None, db: Any) -> tuple[str, list[str]] | None:
+    """The message's validity signal and the values its value table names valid (a
+    state of no measurement, ``invalid``/``error``/``not available``, left out)."""
+    msg = db.get_message_by_name(s.message)
+    found = status_signals(msg, [s.signal] + ([counter] if counter else []))
+    if not found:
+        return None
+    name = found[0][0]
+    sig = msg.get_signal_by_name(name)
+    ok = [f"{sig.conversion.raw_to_scaled(int(raw), False):g}"
+          for raw, label in sorted(sig.choices.items()) if not is_code_name(str(label))]
+    return (name, ok) if ok else None
+
+
+def _codes_note(s: SignalInfo, counter: str | None, db: Any) -> list[str]:
+    """What the DBC's value tables say of a mapped signal's frames: codes counted, never
+    binned; the validity signal whose other values drop the frame."""
+    msg = db.get_message_by_name(s.message)
+    sig = msg.get_signal_by_name(s.signal)
+    out = []
+    codes = [f"{raw} {label!s}" for raw, label in sorted((sig.choices or {}).items())
+             if is_code_name(str(label))]
+    if codes:
+        out.append(f"{s.message}.{s.signal} codes {', '.join(codes)}: counted "
+                   "(not_available), never binned")
+    v = _validity(s, counter, db)
+    if v is not None:
+        out.append(f"{s.message}.{v[0]} marks frames valid at {', '.join(v[1])}; others "
+                   "are dropped (invalid)")
+    return out
 
 
 def _describe(s: SignalInfo, counter: str | None, db: Any) -> str:
@@ -146,7 +189,7 @@ def scaffold(dbc: str | Path, out: str | Path, *, bus: Mapping[str, Any] | None 
             results = {g: (res[g], summ.get(g, "")) for g in res}
         else:
             own = load_dbc(own_dbc)
-            merged = with_daemon_frames(db, own, [g.drift.unit for g in sv.gyros], id_base,
+            merged = with_daemon_frames(db, own, [_units(sv)[0]] * len(sv.gyros), id_base,
                                         str(dbc))
             dbc_for_session = out.resolve().with_name(f"{out.stem}+gyrostand.dbc")
             if dbc_for_session == dbc:
@@ -183,10 +226,13 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
          "# Every key is explained in configs/demo.yaml of the gyrostand repository.", ""]
     for w in sv.warnings:
         L.append(f"# CHECK: {w}")
+    drift_unit, unit_notes = _units(sv)
     L += ["session:",
           f"  name: {_yaml_str(session_name)}",
           "  output: runs                    # run folders go here (relative to this file)",
           "  fsync: true                     # each 1-s acknowledgement survives a power cut",
+          f"  drift_unit: {json.dumps(drift_unit, ensure_ascii=False)}"
+          "              # every drift is binned in this unit",
           "",
           "bus:                              # passed to can.Bus(**bus)"]
     L += [f"  # {line}" for line in bus_note]
@@ -199,11 +245,14 @@ def _render(sv: Survey, db: Any, dbc: Path, dbc_for_session: Path, out: Path,
         L.append(f"  - name: {_yaml_str(g.name)}")
         L.append(f"    # drift:       {_describe(g.drift, g.drift_counter, db)}")
         L.append(f"    # temperature: {_describe(g.temperature, g.temperature_counter, db)}")
-        for note in g.notes:
+        codes = (_codes_note(g.drift, g.drift_counter, db)
+                 + _codes_note(g.temperature, g.temperature_counter, db))
+        for note in g.notes + unit_notes.get(g.name, []) + codes:
             L.append(f"    # CHECK: {note}")
-        L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message)))
+        L.append(_channel_line("drift", g.drift, g.drift_counter, _yaml_str(g.drift.message),
+                               db))
         L.append(_channel_line("temperature", g.temperature, g.temperature_counter,
-                               _yaml_str(g.temperature.message)))
+                               _yaml_str(g.temperature.message), db))
         L.append(f"    model: [{', '.join(DEFAULT_MODEL)}]       # terms: see README "
                  "'Model terms'")
         L.append(f"    identifiers: [{', '.join(DEFAULT_IDENTIFIERS)}]  # online; ml always "
@@ -247,21 +296,20 @@ def try_it_command(session: str | Path, bus: Mapping[str, Any]) -> str:
 
 
 def _simulate_lines(sv: Survey, db: Any, try_it: str) -> list[str]:
-    """A ``simulate:`` section for the demo (``run`` ignores it): the profile in the
-    temperature signal's unit, each gyro's truth scaled to its drift signal's range (σ a
-    two-thousandth of it, at least 20 steps of an integer signal), the thermal gain small
-    enough that the drift stays in range."""
-    tunit = temperature_unit(sv.gyros[0].temperature.unit) or "degC"
-    conv = {"K": lambda c: c + 273.15, "degF": lambda c: c * 9 / 5 + 32}.get(
-        tunit, lambda c: c)
-    profile = ", ".join(f"[{t}, {conv(c):g}]" for t, c in _PROFILE_C)
+    """A ``simulate:`` section for the demo (``run`` ignores it): the profile in °C and
+    each gyro's truth in the session's drift unit (the simulator encodes both into the
+    DBC's units), the truth scaled to the drift signal's range (σ a two-thousandth of it,
+    at least 20 steps of an integer signal), the thermal gain small enough that the drift
+    stays in range."""
+    drift_unit = _units(sv)[0]
+    profile = ", ".join(f"[{t}, {c:g}]" for t, c in _PROFILE_C)
     L = ["", "# A simulated stand of this layout, for trying it without the stand (`run`",
          "# ignores this section; its truth is a guess scaled to the DBC's signals):",
          f"#     {try_it}",
          "simulate:",
          "  seed: 1",
          "  duration: 600                   # s of frame time",
-         f"  temperature: [{profile}]   # [t s, T {tunit}]",
+         f"  temperature: [{profile}]   # [t s, T degC]",
          "  rates: {drift: 10, temperature: 10}   # Hz",
          "  gyros:"]
     for g in sv.gyros:
@@ -269,8 +317,13 @@ def _simulate_lines(sv: Survey, db: Any, try_it: str) -> list[str]:
         span = (float(sig.maximum) - float(sig.minimum)
                 if sig.maximum is not None and sig.minimum is not None else 0.0)
         step = 0.0 if sig.is_float else abs(float(sig.scale or 0))  # a float has no step
-        sigma = float(f"{max(span / 2000, 20 * step) or 0.1:.1g}")
-        gamma = float(f"{-(0.01 if tunit == 'degC' else 0.001) * sigma:.1g}")
+        try:  # the signal's range in the session's drift unit
+            conv = rate_conversion(g.drift.unit, drift_unit)
+        except UnitError:
+            conv = None
+        k = abs(conv.scale) if conv is not None else 1.0
+        sigma = float(f"{max(k * span / 2000, 20 * k * step) or 0.1:.1g}")
+        gamma = float(f"{-0.01 * sigma:.1g}")
         L += [f"    {_yaml_str(g.name)}:",
               "      model: [markov, temp, white]",
               f"      params: {{markov.beta: 0.0333, markov.sigma: {_yaml_float(sigma)}, "
@@ -284,6 +337,38 @@ def _yaml_float(x: float) -> str:
     r = repr(float(x))
     mant, e, exp = r.partition("e")
     return f"{mant}.0e{exp}" if e and "." not in mant else r
+
+
+def _units(sv: Survey) -> tuple[str, dict[str, list[str]]]:
+    """The session's drift unit (the drift signals' own when they share one known unit,
+    else deg/h) and, per gyro, the conversions proposed (K/°F/mK to °C, a drift to the
+    session's unit) or the unit that cannot be converted."""
+    units = {g.drift.unit for g in sv.gyros if g.drift.unit.strip()}
+    known = all(_convertible(u) for u in units)
+    drift_unit = units.pop() if len(units) == 1 and known else DEFAULT_DRIFT_UNIT
+    notes: dict[str, list[str]] = {}
+    for g in sv.gyros:
+        for role, s in (("drift", g.drift), ("temperature", g.temperature)):
+            try:
+                conv = (rate_conversion(s.unit, drift_unit) if role == "drift"
+                        else temperature_conversion(s.unit))
+            except UnitError as exc:
+                notes.setdefault(g.name, []).append(
+                    f"{role} {s.message}.{s.signal}: {exc}: give its unit (unit: ...)")
+                continue
+            if conv is not None:
+                notes.setdefault(g.name, []).append(
+                    f"{role} {s.message}.{s.signal} is converted at decode time: "
+                    f"{conv.describe()}")
+    return drift_unit, notes
+
+
+def _convertible(unit: str) -> bool:
+    try:
+        rate_conversion(unit)
+    except UnitError:
+        return False
+    return True
 
 
 def default_bus(session_name: str, channel: str = "can0"

@@ -158,7 +158,11 @@ def test_one_temperature_sensor_serves_several_gyros_but_a_drift_only_one():
     with pytest.raises(ConfigError, match=r"gyros\[1\]\.drift\.signal.*already mapped by "
                                           r"gyros\[0\]\.drift"):
         parse_config({**base, "gyros": gyros}, source="x.yaml", base_dir=DATA)
-    gyros[1]["drift"] = {"message": "IMU_TEMPS", "signal": temp}
+    gyros[1]["drift"] = {"message": "IMU_TEMPS", "signal": temp}  # a temperature in K
+    with pytest.raises(ConfigError, match=r"gyros\[1\]\.drift\.signal: IMU_TEMPS.TempX_K: "
+                                          r"unit 'K' is not an angular rate"):
+        parse_config({**base, "gyros": gyros}, source="x.yaml", base_dir=DATA)
+    gyros[1]["drift"] = {"message": "IMU_TEMPS", "signal": temp, "unit": "rad/s"}
     with pytest.raises(ConfigError, match=r"gyros\[1\]\.drift\.signal.*already mapped"):
         parse_config({**base, "gyros": gyros}, source="x.yaml", base_dir=DATA)
     # and the listener gives each of the three gyros the shared sensor's reading
@@ -172,4 +176,4 @@ def test_one_temperature_sensor_serves_several_gyros_but_a_drift_only_one():
               for k in range(3)]
     samples = _send(frames, cfg).drain()
     assert sorted((g, c) for g, c, _, _ in samples) == sorted([(0, 1), (1, 1), (2, 1)] * 3)
-    assert all(abs(v - 304.65) < 0.05 for *_, v in samples)
+    assert all(abs(v - 31.5) < 0.05 for *_, v in samples)  # K converted to degC

@@ -159,7 +159,8 @@ def test_the_listener_counters_are_the_snapshot_fields():
     # the reasons' order is the JSON key order of stats.decoder.rejected
     assert REASONS == ("unknown_id", "wrong_dlc", "undecodable", "out_of_range",
                        "bad_timestamp", "non_monotonic", "time_jump", "error_frame",
-                       "remote_frame", "overflow")
+                       "remote_frame", "overflow", "not_available", "invalid",
+                       "second_source", "command_overflow")
     assert list(asdict(Rejections())) == list(REASONS)
 
 

@@ -3,6 +3,7 @@ and repair), the ledger on top of it, and a resume's repair of a replayed folder
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
@@ -139,6 +140,9 @@ def test_resume_cuts_torn_lines_and_estimates_past_the_last_kept_bin(replayed, c
     sp, ep = samples_path(run_dir, "az"), run_dir / "az" / "estimates.csv"
     samples, estimates = sp.read_bytes().split(b"\n"), ep.read_bytes().split(b"\n")
     kept = 400  # data rows of samples.csv that were acknowledged
+    # a live run's folder (only those are resumed; the replay's files stand for its)
+    doc = json.loads((run_dir / "result.json").read_text())
+    (run_dir / "result.json").write_text(json.dumps({**doc, "source": "live"}))
     # the daemon died: samples.csv torn inside row kept + 1, estimates.csv 50 rows further
     sp.write_bytes(b"\n".join(samples[:kept + 1]) + b"\n" + samples[kept + 1][:17])
     ep.write_bytes(b"\n".join(estimates[:kept + 51]) + b"\n" + estimates[kept + 51][:30])

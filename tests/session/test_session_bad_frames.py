@@ -92,6 +92,11 @@ def test_commands_are_acked_or_refused_with_a_reason(bad_run):
                                          "rate_limited": 0, "nacks_suppressed": 0}
     snap = json.loads((outcome.run_dir / "snapshot.json").read_text())
     assert snap["gyros"]["az"]["lsq"]["status"] in ("ok", "warning")
-    # after the reset the online identifiers start over: the last rows say so
+    # a reset restarts the online identifiers before the bin that holds its frame time
+    # (replay = live): here it came after the last bin's end, so every row is from before
     last = (outcome.run_dir / "az" / "estimates.csv").read_text().splitlines()[-1]
-    assert last.endswith("insufficient_data")
+    reset = FrameEncoder(cfg.db).command_frame(cfg.responses.command, "reset", 6, 1).data
+    (reset_t,) = [f.timestamp for f in seen if f.arbitration_id == cfg.responses.command
+                  .frame_id and bytes(f.data) == bytes(reset)]
+    assert reset_t >= float(last.split(",")[0]) + cfg.sampling.dt
+    assert last.endswith(",ok")

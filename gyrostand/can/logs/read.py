@@ -16,8 +16,11 @@ so the reader process starts quickly.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import io
 import logging
+import sys
 import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -76,6 +79,22 @@ class LogDamage:
         self.notes += [str(n) for n in other["notes"]][:max(0, 20 - len(self.notes))]  # type: ignore[attr-defined]
 
 
+@contextlib.contextmanager
+def _quiet_unraisable(path: Path) -> Iterator[None]:
+    """``sys.unraisablehook`` logging at debug level, instead of printing "Exception
+    ignored in: ... __del__" tracebacks (a reader half-built from a truncated file)."""
+    old = sys.unraisablehook
+
+    def hook(u: Any) -> None:
+        log.debug("%s: %s in %r while closing a reader", path, u.exc_value, u.object)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = old
+
+
 def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.Message]:
     """Frames of a log file, in file order. Raises :class:`CanEdgeError` naming the file
     when it cannot be opened at all (missing, not a log, a damaged BLF file header).
@@ -98,10 +117,15 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     if suffix in TEXT_SUFFIXES:
         yield from read_text_log(path, damage)
         return
-    try:
-        reader = can.LogReader(path)
-    except Exception as exc:
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
+    failed = None
+    with _quiet_unraisable(path):  # asammdf's MDF4.__del__ fails on a half-opened file
+        try:
+            reader = can.LogReader(path)
+        except Exception as exc:
+            failed = f"{path}: cannot read CAN log: {exc}"
+        gc.collect()  # the half-built reader goes here, under the quiet hook
+    if failed is not None:
+        raise CanEdgeError(failed)
     try:
         yield from reader
     except Exception as exc:

@@ -42,9 +42,20 @@ _ASC_FRAME_HEAD = re.compile(r"\s*\d+\.\d+\s+\d+\s+\w+\s+(?:Tx|Rx)\s+[dr](?:\s|$
                              re.IGNORECASE)
 
 
+#: a CAN FD frame line's start: ``<t> CANFD`` (or a cut prefix of it) ...
+_ASC_FD_START = re.compile(r"\s*\d+\.\d+\s+C(?:A(?:N(?:F(?:D)?)?)?)?(?:\s|$)")
+#: ... and complete up to its data length: ``<t> CANFD <ch> Rx|Tx <id> [name] <brs>
+#: <esi> <dlc> <length>`` (the data are counted on the frame python-can makes of it)
+_ASC_FD_HEAD = re.compile(r"\s*\d+\.\d+\s+CANFD\s+\d+\s+(?:Tx|Rx)\s+[0-9A-Fa-f]+x?\s+"
+                          r"(?:\S+\s+)?[01]\s+[01]\s+[0-9A-Fa-f]{1,2}\s+\d+(?:\s|$)",
+                          re.IGNORECASE)
+
+
 def _asc_cut(line: str) -> bool:
-    """Whether ``line`` is an ASC frame line cut short before its data (python-can would
-    skip it without a word)."""
+    """Whether ``line`` is an ASC frame line (classic or CAN FD) cut short before its data
+    (python-can would skip it without a word)."""
+    if _ASC_FD_START.match(line):
+        return not _ASC_FD_HEAD.match(line)
     return bool(_ASC_FRAME_START.match(line)) and not _ASC_FRAME_HEAD.match(line)
 
 

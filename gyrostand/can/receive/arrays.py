@@ -31,6 +31,8 @@ _IGNORED = -1  # an id of the DBC that is not mapped
 _NOT_HERE = -2  # a route the array path does not take (a command)
 _UNKNOWN = -3  # an id not in the DBC
 _FLAGGED = -4  # an error or remote frame
+_OTHER_SOURCE = -5  # a mapped PGN from a source address no channel maps (ignored)
+_SECOND_SOURCE = -6  # a mapped PGN from a second source address (rejected)
 
 
 class _Lookup(NamedTuple):
@@ -41,6 +43,7 @@ class _Lookup(NamedTuple):
     code: Any
     routes: list[Route]
     nroutes: int
+    nforeign: int
 
 
 class _Decoded(NamedTuple):
@@ -51,6 +54,9 @@ class _Decoded(NamedTuple):
 
     undec: Any
     oor: Any
+    inval: Any  # the validity signal marked the frame invalid
+    na: Any  # every mapped value a VAL_ code
+    nadrop: Any  # mapped values dropped as codes, per frame
     nsamp: Any
     per_route: dict[int, tuple]
     single: dict[int, bool]
@@ -99,25 +105,28 @@ class ArrayPath(FramePath):
         ``_IGNORED`` a DBC id not mapped, ``_NOT_HERE`` a route the array path does not
         take (a command). Rebuilt when routes were added (J1939 ids cached by
         :meth:`_pgn_route`)."""
-        if self._table is not None and self._table[3] == len(self._routes):
+        if (self._table is not None and self._table[3] == len(self._routes)
+                and self._table[4] == len(self._foreign)):
             return self._table  # type: ignore[return-value]
         import numpy as np
 
         routes: list[Route] = []
         codes: dict[int, int] = {k: _IGNORED for k in self._known}
         for k, r in self._routes.items():
-            if r.is_command:
+            if r.is_command or (r.checked and self._array_decode.get(id(r)) is None):
                 codes[k] = _NOT_HERE
             else:
                 if r not in routes:
                     routes.append(r)
                 codes[k] = routes.index(r)
+        for k, pinned in self._foreign.items():
+            codes[k] = _OTHER_SOURCE if pinned else _SECOND_SOURCE
         keys = np.array(sorted(codes), dtype=np.int64)
         code = np.array([codes[k] for k in sorted(codes)], dtype=np.int64)
-        self._table = _Lookup(keys, code, routes, len(self._routes))
+        self._table = _Lookup(keys, code, routes, len(self._routes), len(self._foreign))
         return self._table
 
-    def _route_values(self, r: Route, data, np) -> tuple:
+    def _route_values(self, r: Route, data, np) -> tuple:  # noqa: C901
         """Per mapped signal of route ``r`` (in its extract order), for payloads ``data``
         (n x w): (present, value, counter present, counter), and the frames that did not
         decode. Array-extracted when the route has an array extractor, else decoded
@@ -128,10 +137,20 @@ class ArrayPath(FramePath):
         if dec is not None:
             got = dec(data)  # type: ignore[operator]
             yes = np.ones(n, bool)
+            # the DBC's verdicts, as checked_decoder gives them frame by frame
+            inval = np.zeros(n, bool)
+            for vname, codes, accept in r.valid:
+                inval |= np.isin(got[vname], np.array(sorted(codes), float)) != accept
             for _, _, name, _, _, cname, _, _ in r.extract:
-                out.append((yes, got[name], yes if cname else ~yes,
+                present = yes
+                if name in r.codes:
+                    present = ~np.isin(got[name], np.array(sorted(r.codes[name]), float))
+                if name in r.convert:  # into the channel's unit, as checked_decoder does
+                    s, o = r.convert[name]
+                    got[name] = got[name] * s + o
+                out.append((present & ~inval, got[name], yes if cname else ~yes,
                             got[cname] if cname else np.zeros(n, np.int64)))
-            return out, ~yes
+            return out, ~yes, inval
         raw = np.ascontiguousarray(data[:, :r.length]).tobytes()
         length, decode = r.length, r.decode
         rows = []
@@ -150,7 +169,7 @@ class ArrayPath(FramePath):
             cp = np.array([v is not None for v in cvs], bool)
             cnt = np.array([int(v) if v is not None else 0 for v in cvs], np.int64)
             out.append((present, value, cp, cnt))
-        return out, undec
+        return out, undec, np.zeros(n, bool)
 
     def _codes(self, fa: FrameArrays, table: _Lookup, np) -> Any:
         """The code of each frame (see :meth:`_lookup`; ``_UNKNOWN`` an id not in the
@@ -175,6 +194,7 @@ class ArrayPath(FramePath):
             if pgn in self._by_pgn:
                 if self._pgn_route(k) is not None and k not in self._routes:
                     hint.append(k)  # routed but not cached (MAX_ROUTES)
+
             elif (k not in self._known and pgn in self._pgn_hint
                   and k not in self._hinted and len(self._hinted) < 64):
                 hint.append(k)
@@ -186,6 +206,9 @@ class ArrayPath(FramePath):
         m = len(c)
         undec = np.zeros(m, bool)
         oor = np.zeros(m, bool)
+        inval = np.zeros(m, bool)
+        na = np.zeros(m, bool)
+        nadrop = np.zeros(m, np.int64)
         nsamp = np.zeros(m, np.int64)
         # per route: its frames, and per mapped signal (present, value, counter...)
         per_route: dict[int, tuple] = {}
@@ -195,14 +218,20 @@ class ArrayPath(FramePath):
             sel = np.flatnonzero(cand & (c == i))
             if not len(sel):
                 continue
-            cols, und = self._route_values(r, fa.data[sel], np)
+            cols, und, inv = self._route_values(r, fa.data[sel], np)
             undec[sel] = und
+            inval[sel] = inv
             bad_v = np.zeros(len(sel), bool)
             ns = np.zeros(len(sel), np.int64)
+            drop = np.zeros(len(sel), np.int64)
             for (present, value, _, _), x in zip(cols, r.extract, strict=True):
                 lo, hi = x[3], x[4]
                 bad_v |= present & ~((lo <= value) & (value <= hi))  # NaN: out of range
                 ns += present
+                if x[2] in r.codes:
+                    drop += ~present & ~inv
+            nadrop[sel] = drop
+            na[sel] = (drop > 0) & (ns == 0) & ~inv
             oor[sel] = bad_v & ~und
             nsamp[sel] = ns
             per_route[i] = (sel, cols)
@@ -210,7 +239,8 @@ class ArrayPath(FramePath):
             single_routes[i] = len(cols) == 1 and bool(cols[0][0].all())
             if single_routes[i]:
                 value1[sel] = cols[0][1]
-        return _Decoded(undec, oor, nsamp, per_route, single_routes, value1)
+        return _Decoded(undec, oor, inval, na, nadrop, nsamp, per_route, single_routes,
+                        value1)
 
     def _in_time(self, t, c, ia, nsamp, routes: list[Route], np) -> Any:
         """Per decoded, in-range frame ``ia`` (in order): whether the fast path accepts
@@ -251,8 +281,11 @@ class ArrayPath(FramePath):
         n.bus_errors += nerr
         rej.error_frame += nerr
         rej.remote_frame += int(np.count_nonzero(fl != 0)) - nerr
+        other = int(np.count_nonzero(cs == _OTHER_SOURCE))
         n.ignored += (int(np.count_nonzero(cs == _IGNORED))
-                      + int(np.count_nonzero(ign[:stop])))
+                      + int(np.count_nonzero(ign[:stop]))) + other
+        n.other_source += other
+        rej.second_source += int(np.count_nonzero(cs == _SECOND_SOURCE))
         unknown = cs == _UNKNOWN
         nunk = int(np.count_nonzero(unknown))
         rej.unknown_id += nunk
@@ -265,6 +298,9 @@ class ArrayPath(FramePath):
         rej.bad_timestamp += int(np.count_nonzero(rt & ok_len[:stop] & ~finite[:stop]))
         rej.undecodable += int(np.count_nonzero(dec.undec[:stop]))
         rej.out_of_range += int(np.count_nonzero(dec.oor[:stop]))
+        rej.invalid += int(np.count_nonzero(dec.inval[:stop]))
+        rej.not_available += int(np.count_nonzero(dec.na[:stop]))
+        n.not_available += int(dec.nadrop[:stop].sum())
 
     def _receive_arrays(self, fa: FrameArrays) -> int:
         """The per-frame path of :meth:`_receive` on arrays, for the frames before the
@@ -290,9 +326,12 @@ class ArrayPath(FramePath):
             ext = (key & EXTENDED_KEY_BIT) != 0
             odd = ((c == _UNKNOWN) | (c == _IGNORED)) & ext
             if odd.any():
-                routed_now = len(self._routes)
-                hint = self._j1939_hints(np.unique(key[odd]).tolist())
-                if len(self._routes) != routed_now:  # J1939 ids routed: look up again
+                routed_now = len(self._routes), len(self._foreign)
+                # in order of first appearance: the first source address seen is the
+                # device's (what the per-frame path decides)
+                uk, first = np.unique(key[odd], return_index=True)
+                hint = self._j1939_hints(uk[np.argsort(first)].tolist())
+                if (len(self._routes), len(self._foreign)) != routed_now:  # look up again
                     return self._receive_arrays(fa)
                 if hint:
                     bad |= np.isin(key, hint)
@@ -307,7 +346,7 @@ class ArrayPath(FramePath):
         cand = routed & ok_len & finite
         cand[stop:] = False
         dec = self._decode_routes(fa, c, cand, routes, np)
-        ign = cand & ~dec.undec & ~dec.oor & (dec.nsamp == 0)
+        ign = cand & ~dec.undec & ~dec.oor & ~dec.inval & ~dec.na & (dec.nsamp == 0)
         acc = cand & ~dec.undec & ~dec.oor & (dec.nsamp > 0)
         # timing, in order: the anchor before each accepted frame is the running maximum
         ia = np.flatnonzero(acc)

@@ -40,7 +40,7 @@ class CommandQueue(ReceiveState):
             self._malformed_command(route, t, data, "undecodable")
             return
         if len(self._commands) >= self._command_capacity:
-            rej.overflow += 1
+            rej.command_overflow += 1  # not the samples' overflow: the command queue's
             return
         self._commands.append((t if _isfinite(t) else self.last_timestamp, dict(values)))
         n.decoded += 1
@@ -52,8 +52,7 @@ class CommandQueue(ReceiveState):
         rejected): queue it marked ``MALFORMED`` so the daemon answers with a nack, with
         whatever signals the bytes present still give (to echo Command and Sequence)."""
         if len(self._commands) >= self._command_capacity:
-            self._rej.overflow += 1
-            return
+            return  # counted already (wrong_dlc / undecodable); no room for its nack
         try:
             values = dict(route.message.decode(bytes(data), decode_choices=False,
                                                allow_truncated=True, allow_excess=True))

@@ -29,7 +29,11 @@ class Rejections:
     time_jump: int = 0      # timestamp more than max_gap after the previous frame
     error_frame: int = 0
     remote_frame: int = 0
-    overflow: int = 0       # the sample buffer (or command queue) was full
+    overflow: int = 0       # the sample buffer was full
+    not_available: int = 0  # every mapped value a VAL_ code (NotAvailable, Error, SNA...)
+    invalid: int = 0        # the message's validity signal marked the frame invalid
+    second_source: int = 0  # a mapped J1939 PGN from a 2nd source address (not mapped)
+    command_overflow: int = 0  # the command queue was full (a command frame dropped)
 
 
 #: Rejection reasons, in the order of :attr:`DecodeStats.rejected`.
@@ -49,6 +53,8 @@ class Counts:
     counter_jumps: int = 0
     bus_errors: int = 0
     listener_errors: int = 0
+    not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
+    other_source: int = 0  # ignored: a mapped PGN from a source address no channel maps
 
 
 #: The fields of :class:`Counts`, in order (the first keys of ``stats.decoder``).
@@ -68,6 +74,8 @@ class DecodeStats:
     bus_errors: int
     listener_errors: int
     rejected: dict[str, int]
+    not_available: int = 0  # mapped values dropped as VAL_ codes (in any frame)
+    other_source: int = 0  # ignored: a mapped PGN from a source address no channel maps
     clock_steps: int = 0  # confirmed steps of the frames' clock (each re-anchored)
     held: int = 0  # frames waiting for a second frame to confirm their time
 

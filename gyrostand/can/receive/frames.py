@@ -20,6 +20,7 @@ from gyrostand.can.logs.frames import ERROR_FRAME, Frame
 from gyrostand.can.receive.commands import CommandQueue
 from gyrostand.can.receive.state import Sample
 from gyrostand.can.receive.timing import FrameTiming
+from gyrostand.can.routes import Dropped, Invalid
 
 __all__ = ["FramePath"]
 
@@ -72,7 +73,14 @@ class FramePath(FrameTiming, CommandQueue):
     def _unrouted(self, key: int) -> None:
         """Count a frame whose key has no route: a DBC id not mapped (ignored) or an id
         not in the DBC (rejected; an extended one of a mapped PGN is named once)."""
-        if key in self._known:
+        pinned = self._foreign.get(key)
+        if pinned is not None:  # a mapped PGN from a source address not taken
+            if pinned:
+                self._n.ignored += 1
+                self._n.other_source += 1
+            else:
+                self._rej.second_source += 1
+        elif key in self._known:
             self._n.ignored += 1
         else:
             self._rej.unknown_id += 1
@@ -122,6 +130,12 @@ class FramePath(FrameTiming, CommandQueue):
                         continue
                     try:
                         values = route.decode(data)
+                    except Dropped as why:  # the DBC says: no measurement in this frame
+                        if isinstance(why, Invalid):
+                            rej.invalid += 1
+                        else:
+                            rej.not_available += 1
+                        continue
                     except Exception:
                         rej.undecodable += 1
                         continue

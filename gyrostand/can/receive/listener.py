@@ -33,7 +33,8 @@ from gyrostand.can.receive.arrays import ArrayPath
 from gyrostand.can.receive.counts import COUNT_FIELDS, REASONS, Counts, DecodeStats, Rejections
 from gyrostand.can.receive.extract import array_extractor, extractor
 from gyrostand.can.receive.state import UNRANGED_LIMIT, Held, Sample
-from gyrostand.can.routes import ChannelMap, Route, decoder
+from gyrostand.can.routes import ChannelMap, Route, checked_decoder, decoder
+from gyrostand.can.validity import code_values
 
 __all__ = ["DecodingListener"]
 
@@ -80,16 +81,29 @@ class DecodingListener(ArrayPath, can.Listener):
         self._routes: dict[int, Route] = {}
         self._known = {frame_key(m.frame_id, bool(m.is_extended_frame)) for m in db.messages}
         self._last_counter: dict[tuple[int, int], int] = {}
+        self._pinned: dict[int, tuple[int, int]] = {}  # route key -> (PGN, source address)
         self._map_signals(db, channels)
-        # J1939: PGN -> route of the messages matched by PGN; an extended id of such a PGN
-        # is looked up once and then cached in _routes under its own key
-        self._by_pgn = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r for k, r in self._routes.items()
-                        if k in channels.pgn}
+        # J1939: PGN -> route of the messages matched by PGN (any source address; the first
+        # one seen is taken, _first_sa), or {source address: route} where the session maps
+        # each address; an extended id of such a PGN is looked up once, then cached in
+        # _routes under its own key; an id of another address is named once (_foreign)
+        self._by_pgn: dict[int, Route | dict[int, Route]] = {}
+        for k, r in self._routes.items():
+            if k in self._pinned:
+                pgn, sa = self._pinned[k]
+                by_sa = self._by_pgn.setdefault(pgn, {})
+                assert isinstance(by_sa, dict)
+                by_sa[sa] = r
+            elif k in channels.pgn:
+                self._by_pgn[j1939_pgn(k & ~EXTENDED_KEY_BIT)] = r
+        self._first_sa: dict[int, int] = {}
+        self._foreign: dict[int, bool] = {}
         # the other extended mapped messages by PGN, to say once when frames of their PGN
         # arrive from another source address (matching on the full id drops them)
         self._pgn_hint = {j1939_pgn(k & ~EXTENDED_KEY_BIT): r.message.name
                           for k, r in self._routes.items()
-                          if k & EXTENDED_KEY_BIT and k not in channels.pgn}
+                          if k & EXTENDED_KEY_BIT and k not in channels.pgn
+                          and k not in self._pinned}
         self._hinted: set[int] = set()
         if command is not None:  # a command is read whole, by cantools
             route = self._route(db, command)
@@ -104,7 +118,12 @@ class DecodingListener(ArrayPath, can.Listener):
                 continue
             cnames = [x[5] for x in route.extract if x[5]]
             self._array_decode[id(route)] = array_extractor(
-                route.message, [x[2] for x in route.extract] + cnames, ints=cnames)
+                route.message, [x[2] for x in route.extract] + cnames
+                + [v[0] for v in route.valid], ints=cnames)
+        # a PGN matched from any address is routed through _pgn_route, its DBC id too
+        # (the first source address seen is the device's)
+        for k in [k for k in self._routes if k in channels.pgn and k not in self._pinned]:
+            del self._routes[k]
         self._table = None
         self._committing = False
         self.reset_counters()
@@ -112,26 +131,56 @@ class DecodingListener(ArrayPath, can.Listener):
     def _map_signals(self, db: Database, channels: ChannelMap) -> None:
         """A route per mapped message, with what it extracts per mapped signal (range,
         rolling counter and its modulus) and a decoder of those signals only."""
+        codes: dict[int, dict[str, frozenset]] = {}
+        valid: dict[int, dict[str, tuple[str, frozenset, bool]]] = {}
         for g, pair in enumerate(channels.signals):
             for c, ref in enumerate(pair):
-                route = self._route(db, ref.message)
+                sa = channels.sources[g][c] if channels.sources else None
+                key = ref.message.key
+                if sa is not None:  # the device at this J1939 source address only
+                    key = (key & ~0xFF) | sa
+                    self._pinned[key] = (j1939_pgn(key & ~EXTENDED_KEY_BIT), sa)
+                route = self._route(db, ref.message, key)
                 lo = -UNRANGED_LIMIT if ref.minimum is None else ref.minimum
                 hi = UNRANGED_LIMIT if ref.maximum is None else ref.maximum
+                conv = channels.convert[g][c] if channels.convert else None
+                if conv is not None:  # the range check runs on the converted value
+                    lo, hi = sorted((conv(lo), conv(hi)))
+                    route.convert[ref.name] = (conv.scale, conv.offset)
                 cnt = channels.counters[g][c] if channels.counters else None
                 mod = 256
                 if cnt is not None and cnt.maximum is not None:
                     mod = int(cnt.maximum) + 1
                 route.extract.append((g, c, ref.name, lo, hi,
                                       cnt.name if cnt else None, mod, (g, c)))
+                bad = code_values(route.message.get_signal_by_name(ref.name))
+                if bad:
+                    codes.setdefault(id(route), {})[ref.name] = bad
+                v = channels.valid[g][c] if channels.valid else None
+                if v is not None:
+                    valid.setdefault(id(route), {})[v[0]] = v
         for route in self._routes.values():  # the mapped signals only, layout-blind
-            needed = [x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+            vs = list(valid.get(id(route), {}).values())
+            needed = ([x[2] for x in route.extract] + [x[5] for x in route.extract if x[5]]
+                      + [v[0] for v in vs])
             route.decode = extractor(route.message, needed) or route.decode
+            cs = codes.get(id(route), {})
+            route.codes, route.valid = cs, vs
+            route.checked = bool(cs or vs)
+            if route.checked or route.convert:  # decoded, checked and converted per frame
+                route.decode = checked_decoder(route.decode, [x[2] for x in route.extract],
+                                               cs, vs, route.convert, self._count_codes)
 
-    def _route(self, db: Database, ref: MessageRef) -> Route:
-        if ref.key not in self._routes:
+    def _count_codes(self, k: int) -> None:
+        """``k`` mapped values were value-table codes (the lock is held: per-frame path)."""
+        self._n.not_available += k
+
+    def _route(self, db: Database, ref: MessageRef, key: int | None = None) -> Route:
+        key = ref.key if key is None else key
+        if key not in self._routes:
             msg = db.get_message_by_name(ref.name)
-            self._routes[ref.key] = Route(msg, msg.length)
-        return self._routes[ref.key]
+            self._routes[key] = Route(msg, msg.length)
+        return self._routes[key]
 
     def resync(self) -> None:
         """After a bus outage: forget the rolling counters' last values (frames were lost).
@@ -139,6 +188,14 @@ class DecodingListener(ArrayPath, can.Listener):
         of the raw log, which knows nothing of the outage (:meth:`_timed`)."""
         with self._lock:
             self._last_counter.clear()
+
+    def resume_after(self, t: float) -> None:
+        """A resumed run: frame time ``t`` (s, the start of the last kept bin) stands for
+        the newest accepted frame, so the next frames are timed as if they followed it:
+        later ones within ``max_gap`` are a pause, earlier ones (a stand clock that went
+        back) a clock step re-anchored into the bins after it, never late."""
+        with self._lock:
+            self._anchor = float(t)
 
     def reset_counters(self) -> None:
         """Zero every counter (the FIFO and timestamp history are kept)."""

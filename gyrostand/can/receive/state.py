@@ -79,7 +79,10 @@ class ReceiveState:
     _routes: dict[int, Route]
     _known: set[int]
     _last_counter: dict[tuple[int, int], int]
-    _by_pgn: dict[int, Route]
+    _by_pgn: dict[int, Route | dict[int, Route]]
+    _first_sa: dict[int, int]
+    _foreign: dict[int, bool]
+    _pinned: dict[int, tuple[int, int]]
     _pgn_hint: dict[int, str]
     _hinted: set[int]
     _unknown: dict[int, int]
@@ -98,12 +101,46 @@ class ReceiveState:
     def _pgn_route(self, key: int) -> Route | None:
         """The route of an extended id by its J1939 PGN (``match: pgn``), cached under the
         id; None for a standard id or another PGN."""
-        if not key & EXTENDED_KEY_BIT:
+        if not key & EXTENDED_KEY_BIT or key in self._foreign:
             return None
-        route = self._by_pgn.get(j1939_pgn(key & ~EXTENDED_KEY_BIT))
-        if route is not None and len(self._routes) < MAX_ROUTES:
+        fid = key & ~EXTENDED_KEY_BIT
+        pgn, sa = j1939_pgn(fid), fid & 0xFF
+        entry = self._by_pgn.get(pgn)
+        if entry is None:
+            return None
+        if isinstance(entry, dict):  # the session maps each source address
+            route = entry.get(sa)
+            if route is None:
+                self._foreign_source(key, pgn, sa, None)
+                return None
+        else:
+            route = entry
+            first = self._first_sa.setdefault(pgn, sa)
+            if first != sa:  # a second device on one mapping: never merged
+                self._foreign_source(key, pgn, sa, first)
+                return None
+        if len(self._routes) < MAX_ROUTES:
             self._routes[key] = route
         return route
+
+    def _foreign_source(self, key: int, pgn: int, sa: int, first: int | None) -> None:
+        """Name once an id of a mapped PGN from a source address the session does not
+        take: ``first`` None, the session maps other addresses (``source_address``):
+        ignored, counted ``other_source``; else a second device on a mapping of any
+        address, whose first device sent from ``first``: ``rejected.second_source``."""
+        if len(self._foreign) >= MAX_UNKNOWN_IDS:
+            return
+        self._foreign[key] = first is None
+        if first is None:
+            log.warning("frames 0x%X: J1939 PGN 0x%X from source address 0x%02X, which no "
+                        "channel maps (source_address): ignored (other_source)",
+                        key & ~EXTENDED_KEY_BIT, pgn, sa)
+        else:
+            log.warning("frames 0x%X: J1939 PGN 0x%X from a second source address 0x%02X "
+                        "(the first was 0x%02X): two devices on one `match: pgn` mapping; "
+                        "only 0x%02X is decoded, these are rejected (second_source). Map "
+                        "each address with source_address:", key & ~EXTENDED_KEY_BIT, pgn,
+                        sa, first, first)
 
     def _count_unknown(self, key: int, n: int = 1) -> None:
         """Count ``n`` frames of ``key``, an id not in the DBC (by id while fewer than
