@@ -70,7 +70,7 @@ def _add_global_args(parser: argparse.ArgumentParser, default: Any) -> None:
                    dest=f"verbose_{id(parser)}", help="more logging (-vv: debug)")
     g.add_argument("-q", "--quiet", action="store_true", default=default,
                    dest=f"quiet_{id(parser)}",
-                   help="no progress bars: one line per finished stage on stderr")
+                   help="no progress bars (off a terminal there are none either)")
 
 
 def _gather_globals(args: argparse.Namespace) -> None:

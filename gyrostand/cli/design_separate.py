@@ -18,7 +18,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design.search import case_temperature, standard_cycle
+    from ..core.design.search import case_temperature, search_budget, standard_cycle
     from ..core.design.separation import (
         Rivals,
         rival_models,
@@ -59,7 +59,9 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
         with progress.stage("design", "the look-alike's parameters"):
             riv = rivals(Model.parse(args.model), a, b, {"white.sigma": 0.0, **given},
                          limits.grid, ref_case, limits.dt, seed=args.seed)
-    with progress.stage("design", f"search: {a} vs {b}", unit="evaluations") as bar:
+    with progress.stage("design", f"search: {a} vs {b}", unit="evaluations",
+                        total=search_budget(limits, starts=1, maxfev=args.evaluations)
+                        ) as bar:
         # one start (the best of the standard cycle, zigzags, a random program): 86
         # programs, 83 s CPU for 6 h at 40 evaluations
         res = separate(riv, limits, reference_record=reference_record, starts=1,
