@@ -160,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
     verify = None
     if args.verify > 0:
         verify = _verify(model, params, limits, case,
-                         reference_record or (limits.grid, ref_case), args.verify, args.seed)
+                         reference_record or (limits.grid, ref_case), args.verify, args.seed,
+                         res.doubt)
     doc = _document(res, limits, model, ref_label, verify)
     (out / "design.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if args.json:
@@ -191,25 +192,32 @@ def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
     }
 
 
-def _verify(model, params, limits, case, reference, n: int, seed: int) -> dict[str, Any]:
+def _verify(model, params, limits, case, reference, n: int, seed: int,
+            doubt: tuple[str, ...]) -> dict[str, Any]:
     """Realized std of ML over ``n`` simulated runs on each profile."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..core.design.realised import realised_std_gain
+
     out: dict[str, Any] = {"runs": n}
+    est: dict[str, dict[str, list[float]]] = {}
     pool = ProcessPoolExecutor(max_workers=VERIFY_WORKERS,
                                mp_context=multiprocessing.get_context("spawn"))
     with pool:
         for label, (t, temp) in (("designed", (limits.grid, case)),
                                  ("reference", reference)):
-            out[label] = _verify_profile(model, params, limits, t, temp, n, seed, label,
-                                         pool)
+            out[label], est[label] = _verify_profile(model, params, limits, t, temp, n,
+                                                     seed, label, pool)
+    # the headline (#24 item 7): the worst relative std in doubt, realised, with its interval
+    out["realised_gain"] = realised_std_gain(est["designed"], est["reference"], doubt, params)
     return out
 
 
 def _verify_profile(model, params, limits, t, temp, n: int, seed: int, label: str,
-                    pool) -> dict[str, Any]:
-    """One profile of :func:`_verify`: ``n`` runs simulated here, fitted by ``pool``."""
+                    pool) -> tuple[dict[str, Any], dict[str, list[float]]]:
+    """One profile of :func:`_verify`: ``n`` runs simulated here, fitted by ``pool``; its
+    document and the estimates (name -> one value per successful fit)."""
     import numpy as np
 
     from .. import progress
@@ -232,7 +240,7 @@ def _verify_profile(model, params, limits, t, temp, n: int, seed: int, label: st
     return {"failed": sum(r is None for r in fits),
             "realized_std": {k: float(np.std(v, ddof=1)) if len(v) > 2 else None
                              for k, v in est.items()},
-            "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}
+            "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}, est
 
 
 def fit_values(samples: Any, model: Any) -> dict[str, float] | None:
@@ -245,6 +253,20 @@ def fit_values(samples: Any, model: Any) -> dict[str, float] | None:
     except Exception:  # noqa: BLE001 - a failed fit is counted, as before
         return None
     return {k: r.value(k) for k in model.param_names}
+
+
+def headline(verify, rel: float, rrel: float, ref_label: str) -> str:
+    """The gain the design will realise: its verify's, with the interval, when simulated;
+    else the predicted one, said to be predicted (#24 item 7)."""
+    predicted = f"{rrel / rel:.2f}x predicted" if rel > 0 else "predicted: -"
+    g = None if verify is None else verify.get("realised_gain")
+    if g is None:
+        return (f"gain (worst relative std, {ref_label} over designed): {predicted} "
+                "(--verify N simulates the runs and realises it)")
+    lo, hi = g["interval"]
+    return (f"gain (worst relative std, {ref_label} over designed): {g['ratio']:.2f}x "
+            f"realised by --verify {verify['runs']} (95 % bootstrap interval {lo:.2f}-"
+            f"{hi:.2f}); {predicted}")
 
 
 def render(res, limits, ref_label: str, verify, out: Path) -> str:
@@ -260,6 +282,7 @@ def render(res, limits, ref_label: str, verify, out: Path) -> str:
     rname, rrel = res.worst("reference")
     lines.append(f"worst-determined (relative std): designed {name} {rel:.3g}, "
                  f"{ref_label} {rname} {rrel:.3g}")
+    lines.append(headline(verify, rel, rrel, ref_label))
     if verify is not None:
         lines += ["", f"verify: {verify['runs']} simulated runs each, fitted by ML "
                       "(realized std / predicted)"]
