@@ -1,9 +1,12 @@
 """Progress of long commands (replay, diagnose, report, ...) on stderr.
 
-On a terminal each stage shows a tqdm bar (a count and rate when the total is unknown);
-elsewhere (a pipe, a file, a service's journal) and with ``-q/--quiet``, one line per
-finished stage: ``replay: stream: 21,600 bins in 4.2 s``. Nothing is printed per frame:
-a stage is updated by its caller once per batch (the daemon's hot path never sees it).
+On a terminal each stage shows a tqdm bar: with a total, the count, rate and ETA
+(``replay: stream: 40% 4.1M/10.2M bytes [00:02<00:03]``); without one, the count and rate,
+or the time elapsed, redrawn every half second so a long stage never looks stuck.
+Elsewhere (a pipe, a file, a service's journal) and with ``-q/--quiet``, nothing: the
+command's result and its errors are what it prints there (issue 27). Nothing is printed
+per frame: a stage is updated by its caller once per batch (the daemon's hot path never
+sees it).
 
     with progress.stage("replay", "stream", unit="bins") as bar:
         for batch in work:
@@ -11,19 +14,21 @@ a stage is updated by its caller once per batch (the daemon's hot path never see
             bar.update(len(batch))
 
 Library code calls :func:`stage`; only the CLI turns it on (:func:`configure`), so tests
-and scripts that import gyrostand print nothing.
+and scripts that import gyrostand print nothing. :attr:`Stage.lines` says whether a
+stage's bar is drawn (a caller may skip work that only feeds it).
 """
 
 from __future__ import annotations
 
 import shutil
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import IO, Any
 
-__all__ = ["configure", "stage", "Stage"]
+__all__ = ["configure", "drawing", "stage", "Stage"]
 
 _state: dict[str, Any] = {"on": False, "quiet": False, "stream": None}
 
@@ -31,6 +36,12 @@ _state: dict[str, Any] = {"on": False, "quiet": False, "stream": None}
 def configure(*, on: bool = True, quiet: bool = False, stream: IO[str] | None = None) -> None:
     """Turn progress on for this process (the CLI does), ``quiet``: stage lines only."""
     _state.update(on=on, quiet=quiet, stream=stream)
+
+
+def drawing() -> bool:
+    """Whether a stage started now draws a bar (progress on, not quiet, a terminal): a
+    caller may skip work that only feeds one (e.g. reading a log's time span)."""
+    return bool(_state["on"] and not _state["quiet"] and _is_terminal(_stream()))
 
 
 def _stream() -> IO[str]:
@@ -45,19 +56,23 @@ def _is_terminal(stream: IO[str]) -> bool:
 
 
 class Stage:
-    """One stage's counter: :meth:`update` by a batch; a bar on a terminal, else silent
-    until the stage ends."""
+    """One stage's counter: :meth:`update` by a batch; a bar on a terminal (with progress
+    on and not quiet), else silent."""
+
+    #: seconds between redraws of a bar whose caller has not updated it
+    TICK = 0.5
 
     def __init__(self, command: str, name: str, total: float | None, unit: str) -> None:
         self.command, self.name, self.total, self.unit = command, name, total, unit
-        self.n = 0.0
+        self.n: float = 0  # an int while every update is one (tqdm prints it so)
         self._t0 = time.perf_counter()
         self._bar: Any = None
+        self._stop = threading.Event()
         stream = _stream()
-        if _state["on"] and not _state["quiet"] and _is_terminal(stream):
+        if drawing():
             try:
                 from tqdm import tqdm
-            except ImportError:  # no tqdm: stage lines only
+            except ImportError:  # no tqdm: silent
                 tqdm = None
             if tqdm is not None:  # the terminal's size; 80x24 where it reports 0x0 (tqdm
                 size = shutil.get_terminal_size((80, 24))  # hides bars below row 0)
@@ -65,7 +80,31 @@ class Stage:
                 self._bar = tqdm(total=total, unit=f" {unit}", **fmt,
                                  desc=f"{command}: {name}", file=stream, leave=True,
                                  ncols=min(size.columns or 80, 120),
-                                 nrows=size.lines or 24, mininterval=0.2)
+                                 nrows=size.lines or 24, mininterval=0.2,
+                                 unit_scale=unit == "bytes")
+                threading.Thread(target=self._tick, daemon=True,
+                                 name=f"progress-{name}").start()
+
+    @property
+    def lines(self) -> bool:
+        """Whether this stage draws anything."""
+        return self._bar is not None
+
+    def _tick(self) -> None:
+        """Redraw the bar (its elapsed time, its ETA) while its caller is busy."""
+        while not self._stop.wait(self.TICK):
+            bar = self._bar
+            if bar is None:
+                return
+            try:
+                bar.refresh()
+            except (ValueError, OSError):  # the terminal went away
+                return
+
+    def update_to(self, n: float) -> None:
+        """Set the count to ``n`` (e.g. the seconds of a log read so far)."""
+        if n > self.n:
+            self.update(n - self.n)
 
     def update(self, n: float = 1) -> None:
         self.n += n
@@ -73,16 +112,10 @@ class Stage:
             self._bar.update(n)
 
     def close(self, failed: bool = False) -> None:
-        elapsed = time.perf_counter() - self._t0
+        self._stop.set()
         if self._bar is not None:
             self._bar.close()
-            return
-        if not _state["on"]:
-            return
-        what = f"{self.n:,.0f} {self.unit} " if self.n else ""
-        end = "failed after" if failed else "in"
-        print(f"{self.command}: {self.name}: {what}{end} {elapsed:.1f} s", file=_stream(),
-              flush=True)
+            self._bar = None
 
 
 @contextmanager

@@ -71,7 +71,7 @@ def _add_global_args(parser: argparse.ArgumentParser, default: Any) -> None:
                    dest=f"verbose_{id(parser)}", help="more logging (-vv: debug)")
     g.add_argument("-q", "--quiet", action="store_true", default=default,
                    dest=f"quiet_{id(parser)}",
-                   help="no progress bars: one line per finished stage on stderr")
+                   help="no progress bars (off a terminal there are none either)")
 
 
 def _gather_globals(args: argparse.Namespace) -> None:
@@ -140,6 +140,10 @@ def _main(argv: Sequence[str] | None = None) -> int:
     from .. import progress  # stdlib only; tqdm is imported when a bar is drawn
 
     progress.configure(on=args.command not in DAEMON_COMMANDS, quiet=args.quiet)
+    if args.command not in DAEMON_COMMANDS:  # a kernel's first-use compilation as a stage
+        from .compiling import show_compilations
+
+        show_compilations()
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level

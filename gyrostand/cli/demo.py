@@ -55,59 +55,10 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-class _CompileClock:
-    """Wall time numba spends compiling in this process (its ``numba:compile`` events,
-    which fire on a cache miss only: a kernel loaded from its cache costs no event), the
-    outermost compile of nested ones counted once."""
-
-    def __init__(self) -> None:
-        self.kernels = 0
-        self.seconds = 0.0
-        self.names: list[str] = []
-        self._depth = 0
-        self._t0 = 0.0
-
-    def __enter__(self) -> _CompileClock:
-        from numba.core import event
-
-        clock = self
-
-        class _Listener(event.Listener):
-            def on_start(self, ev: Any) -> None:
-                if clock._depth == 0:
-                    clock._t0 = time.perf_counter()
-                    fn = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
-                    name = getattr(fn, "__name__", None)
-                    if name and name not in clock.names:
-                        clock.names.append(name)
-                clock._depth += 1
-
-            def on_end(self, ev: Any) -> None:
-                clock._depth -= 1
-                if clock._depth == 0:
-                    clock.kernels += 1
-                    clock.seconds += time.perf_counter() - clock._t0
-
-        self._listener = _Listener()
-        event.register("numba:compile", self._listener)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        from numba.core import event
-
-        event.unregister("numba:compile", self._listener)
-
-    def line(self) -> str:
-        if not self.kernels:
-            return "numba: every kernel loaded from its cache (nothing compiled)"
-        names = ", ".join(self.names[:6]) + (", ..." if len(self.names) > 6 else "")
-        return (f"numba: first run: {self.kernels} kernel compilation(s) in "
-                f"{self.seconds:.1f} s ({names}; cached beside the package: later runs and "
-                f"commands load them)")
-
-
 def run(args: argparse.Namespace) -> int:
-    with _CompileClock() as clock:
+    from .compiling import CompileClock
+
+    with CompileClock() as clock:
         t0 = time.monotonic()
         code = _run(args)
     print(f"{clock.line()}; demo {time.monotonic() - t0:.1f} s in all", file=progress(args))

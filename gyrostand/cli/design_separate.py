@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..core.design.realised import expected_gain, gain_words, realised_lr_gain
 from .design_program import limits_of, program_document, program_lines, write_files
 
 
@@ -18,7 +19,7 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
     import numpy as np
 
     from .. import progress
-    from ..core.design.search import case_temperature, standard_cycle
+    from ..core.design.search import case_temperature, search_budget, standard_cycle
     from ..core.design.separation import (
         Rivals,
         rival_models,
@@ -59,7 +60,9 @@ def run_separate(args: argparse.Namespace, given: dict[str, float]) -> int:
         with progress.stage("design", "the look-alike's parameters"):
             riv = rivals(Model.parse(args.model), a, b, {"white.sigma": 0.0, **given},
                          limits.grid, ref_case, limits.dt, seed=args.seed)
-    with progress.stage("design", f"search: {a} vs {b}", unit="evaluations") as bar:
+    with progress.stage("design", f"search: {a} vs {b}", unit="evaluations",
+                        total=search_budget(limits, starts=1, maxfev=args.evaluations)
+                        ) as bar:
         # one start (the best of the standard cycle, zigzags, a random program): 86
         # programs, 83 s CPU for 6 h at 40 evaluations
         res = separate(riv, limits, reference_record=reference_record, starts=1,
@@ -119,6 +122,12 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def _gain(num: float, den: float) -> float | None:
+    """An expected-LR ratio, None over a reference below 1 (:func:`expected_gain`)."""
+    g = expected_gain(num, den)
+    return None if g is None else _finite(g)
+
+
 def _lr(expected: dict[str, float]) -> dict[str, float | None]:
     return {**{k: _finite(v) for k, v in expected.items()},
             "total": _finite(sum(expected.values()))}
@@ -133,7 +142,10 @@ def document(res, limits) -> dict[str, Any]:
         **program_document(res.program, limits),
         "reference": res.reference_label,
         "expected_lr": {"designed": _lr(res.expected), "reference": _lr(res.reference_expected)},
-        "gain": _finite(res.gain),
+        # an expected-LR ratio only over a reference that can carry one (#24 item 7)
+        "gain": _gain(sum(res.expected.values()), sum(res.reference_expected.values())),
+        "realised_gain": (None if res.verify is None
+                          else realised_lr_gain(res.verify, (r.a, r.b))),
         "evaluations": res.evaluations,
         "longer_run": None if res.longer is None else {"hours": res.longer[0],
                                                        "expected_lr": _lr(res.longer[1])},
@@ -142,12 +154,34 @@ def document(res, limits) -> dict[str, Any]:
             "time_only": True,
             "splits": [{"runs": k, "run_hours": res.switch_ons.run_hours[k],
                         "expected_lr": _lr(lam)} for k, lam in res.switch_ons.expected.items()],
-            "best": res.switch_ons.best, "gain": _finite(res.switch_ons.gain),
+            "best": res.switch_ons.best,
+            "gain": _gain(sum(res.switch_ons.expected[res.switch_ons.best].values()),
+                          sum(res.switch_ons.expected[1].values())),
             "target_gain": TARGET_GAIN,
         },
         "power_cycle": (None if res.power_cycle is None
                         else power_cycle_document(res.power_cycle)),
     }
+
+
+def headline(res) -> str:
+    """What the design will realise: the verify's gain with its interval when simulated;
+    else the expected LRs side by side (their ratio only over a reference >= 1)."""
+    total, ref = sum(res.expected.values()), sum(res.reference_expected.values())
+    label = res.reference_label
+    if res.verify is not None:
+        g = realised_lr_gain(res.verify, (res.rivals.a, res.rivals.b))
+        if g is not None:
+            lo, hi = g["interval"]
+            return (f"gain: {g['ratio']:.2f}x realised by --verify {res.verify['runs']} "
+                    f"(95 % bootstrap interval {lo:.2f}-{hi:.2f}; mean LR, both directions, "
+                    f"designed over {label}); expected LR {total:.3g} vs {ref:.3g}")
+    return (f"{gain_words(total, ref)}, designed vs {label}: expected, not realised "
+            "(--verify N simulates the runs)")
+
+
+def _said(res) -> str:
+    return gain_words(sum(res.expected.values()), sum(res.reference_expected.values()))
 
 
 def render(res, limits, out: Path) -> str:
@@ -159,14 +193,16 @@ def render(res, limits, out: Path) -> str:
     rows = [(f"{r.a} (fitted by {r.b})", res.expected[r.a], res.reference_expected[r.a]),
             (f"{r.b} (fitted by {r.a})", res.expected[r.b], res.reference_expected[r.b]),
             ("both (sum)", sum(res.expected.values()), sum(res.reference_expected.values()))]
-    for label, d, f in rows:
+    for label, d, f in rows:  # a ratio over an expected LR below 1 is no gain: "-"
+        g = expected_gain(d, f)
         lines.append(f"  {label:<30}{d:>12.4g}{f:>20.4g}"
-                     f"{d / f if f > 0 else math.inf:>8.2f}")
+                     + (f"{g:>8.2f}" if g is not None else f"{'-':>8}"))
+    lines += ["", headline(res)]
     if res.longer is not None:
         hours, lam = res.longer
         longer = sum(lam.values())
         lines += ["", f"the profile hardly changes how {r.a} and {r.b} look alike (gain "
-                      f"{res.gain:.2f}); the duration does: a standard cycle of {hours:g} h "
+                      f"{_said(res)}); the duration does: a standard cycle of {hours:g} h "
                       f"gives an expected LR of {longer:.4g} ({r.a}: {lam[r.a]:.4g}, {r.b}: "
                       f"{lam[r.b]:.4g})"]
     if res.switch_ons is not None:
@@ -209,8 +245,8 @@ def switch_on_lines(res) -> list[str]:
     tot, ref = sum(res.expected.values()), sum(res.reference_expected.values())
     lines = ["", f"{r.a} and {r.b} are time-only effects: both add a function of the time "
                  f"since switch-on alone, so a temperature program moves their expected LR "
-                 f"only through the refit of the rest of the model (designed {tot:.3g} vs "
-                 f"standard cycle {ref:.3g}: gain {res.gain:.2f}).",
+                 f"only through the refit of the rest of the model (designed vs "
+                 f"standard cycle: {gain_words(tot, ref)}).",
              f"A switch-on restarts a warm-up, not a trend: the budget split into k runs "
              f"(one standard cycle each; the wrong model refitted jointly over them, "
              f"shared {r.a if r.a != 'warmup' else r.b}, per-run bias and warm-up):",
@@ -225,8 +261,12 @@ def switch_on_lines(res) -> list[str]:
                      f"{so.gain:.2f}x better than one run (switch the gyro off between "
                      f"runs long enough for it to cool to the chamber)")
     else:
-        best = max(res.gain, so.gain if so.best > 1 else 0.0)
-        lines.append(f"-> the reachable gain over the standard cycle is {best:.2f}, short of "
+        num = max(sum(res.expected.values()),
+                  sum(so.expected[so.best].values()) if so.best > 1 else 0.0)
+        g = expected_gain(num, ref)
+        reach = (f"{g:.2f}" if g is not None else
+                 f"not a ratio to quote (expected LR {num:.3g} vs {ref:.3g})")
+        lines.append(f"-> the reachable gain over the standard cycle is {reach}, short of "
                      f"{TARGET_GAIN:g}x: each run's own turn-on bias absorbs the level at a "
                      f"switch-on, so a restart shows only through the warm-up's curvature "
                      f"within a run, and shorter runs have less of it. What separates them "
@@ -322,8 +362,9 @@ def power_cycle_document(pcr) -> dict[str, Any]:
                      "switch_on_hours": [s / 3600.0 for s in pc.starts]},
         "expected_lr": _lr(pcr.best_expected),
         "reference_expected_lr": _lr(pcr.reference),
-        "gain": _finite(pcr.gain),
-        "by_spread": [{"bias_spread": sb, "expected_lr": _lr(lam), "gain": _finite(pcr.gain_at(sb))}
+        "gain": _gain(sum(pcr.best_expected.values()), sum(pcr.reference.values())),
+        "by_spread": [{"bias_spread": sb, "expected_lr": _lr(lam),
+                       "gain": _gain(sum(lam.values()), sum(pcr.reference.values()))}
                       for sb, lam in pcr.by_spread.items()],
         "target_gain": TARGET_GAIN,
         "verify": pcr.verify,
@@ -351,19 +392,22 @@ def power_cycle_lines(res) -> list[str]:
     for (hours, off), lam in pcr.expected.items():
         tot = sum(lam.values())
         mark = "  <- chosen" if (hours, off) == pc.key else ""
+        g = expected_gain(tot, ref)  # over a standard cycle's expected LR below 1: "-"
         lines.append(f"  {' + '.join(f'{h:g}' for h in hours):>16} {off:>6.3g} "
                      f"{lam[r.a]:>12.4g} "
                      f"{lam[r.b]:>12.4g} {tot:>10.4g} "
-                     f"{tot / ref if ref > 0 else math.inf:>8.1f}{mark}")
+                     + (f"{g:>8.1f}" if g is not None else f"{'-':>8}") + mark)
     best = pcr.best_expected
     lines.append(f"-> {pc.k} switch-ons of {' + '.join(f'{h:g}' for h in pc.hours)} h, "
                  f"{pc.off / 3600:g} h off between "
                  f"them ({pc.chamber_hours:g} h in the chamber): expected LR "
                  f"{sum(best.values()):.4g} ({r.a} {best[r.a]:.3g}, {r.b} {best[r.b]:.3g}) vs "
-                 f"{ref:.3g} for one standard cycle: gain {pcr.gain:.1f}x (the choice: the "
-                 f"largest expected LR of the weaker direction)")
-    lines.append("   the same protocol at other spreads: " + ", ".join(
-        f"sigma_b {sb:g}: gain {pcr.gain_at(sb):.1f}x ({r.a} {lam[r.a]:.3g}, {r.b} "
+                 f"{ref:.3g} for one standard cycle"
+                 + ("" if expected_gain(sum(best.values()), ref) is None
+                    else f": gain {pcr.gain:.1f}x") + " (the choice: the "
+                 "largest expected LR of the weaker direction)")
+    lines.append("   the same protocol at other spreads (expected LR): " + ", ".join(
+        f"sigma_b {sb:g}: {sum(lam.values()):.3g} ({r.a} {lam[r.a]:.3g}, {r.b} "
         f"{lam[r.b]:.3g})" for sb, lam in pcr.by_spread.items()))
     if pcr.verify is not None:
         v = pcr.verify

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 from ..errors import ConfigError
@@ -41,8 +42,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..can.bus import open_bus
-    from ..can.framesim import send_frames, write_log
+    from .. import progress
     from ..config import load_config
     from ..session.offline import simulated_frames
 
@@ -59,10 +59,37 @@ def run(args: argparse.Namespace) -> int:
                     "in every other command)")
         path = args.out_deprecated
     frames = simulated_frames(cfg)
+    total = max(round(sim.duration or sim.temperature[-1][0]), 1)
+    with progress.stage("simulate", "frames", total=total, unit="s of stand time") as bar:
+        said = _emit(args, cfg, sim, path, _timed(frames, bar, total) if bar.lines
+                     else frames)
+        bar.update_to(total)
+    print(said)
+    return 0
+
+
+def _timed(frames: Iterable[Any], bar: Any, total: int) -> Iterator[Any]:
+    """``frames`` unchanged, the stage told their time (whole seconds, at most ``total``)
+    once per second of it."""
+    t0: float | None = None
+    done = 0
+    for msg in frames:
+        if t0 is None:
+            t0 = msg.timestamp
+        elif msg.timestamp - t0 >= done + 1:
+            done = min(int(msg.timestamp - t0), total)
+            bar.update_to(done)
+        yield msg
+
+
+def _emit(args: argparse.Namespace, cfg: Any, sim: Any, path: str | None,
+          frames: Iterable[Any]) -> str:
+    """Write ``frames`` to the log ``path`` or send them on the bus; what was done."""
+    from ..can.bus import open_bus
+    from ..can.framesim import send_frames, write_log
+
     if path:
-        n = write_log(path, frames)
-        print(f"wrote {n} frames to {path}")
-        return 0
+        return f"wrote {write_log(path, frames)} frames to {path}"
     cfg = with_bus_overrides(cfg, args)
     realtime = sim.realtime if args.realtime is None else args.realtime
     bus = open_bus(cfg.bus)
@@ -70,5 +97,4 @@ def run(args: argparse.Namespace) -> int:
         n = send_frames(bus, frames, realtime=realtime, speed=args.speed)
     finally:
         bus.shutdown()
-    print(f"sent {n} frames on {cfg.bus.get('interface')}:{cfg.bus.get('channel')}")
-    return 0
+    return f"sent {n} frames on {cfg.bus.get('interface')}:{cfg.bus.get('channel')}"

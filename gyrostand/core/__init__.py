@@ -24,7 +24,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from .jit import choose_cache_dir
 from .lazy import exports
+
+choose_cache_dir()  # numba's kernel cache: beside the package if writable, else the user's
 
 if TYPE_CHECKING:
     from .data import Samples

@@ -21,6 +21,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .jit import listen
+from .rts import kf_smooth as kf_smooth
+from .rts import rts_forward, writable
+
+listen()  # a compilation is shown as progress (jit.watch)
+
 
 @njit(cache=True, nogil=True, inline="always")
 def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
@@ -92,8 +98,15 @@ def joseph_covariance(P, H, K, PH, r, B, BH):  # pragma: no cover - compiled
     joseph_finish(P, B, BH, K, r)
 
 
+def kf_run(phi, q, p0, r, rw, Y, store):
+    """Filter every column of ``Y`` (shape (N, m)) with the same gains: see
+    :func:`_kf_run`, to which this passes writable arrays (one compiled version)."""
+    return _kf_run(writable(phi), writable(q), writable(p0), float(r), writable(rw),
+                   writable(Y), bool(store))
+
+
 @njit(cache=True, nogil=True)
-def kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
+def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     """Filter every column of ``Y`` (shape (N, m)) with the same gains.
 
     ``rw`` (N,) or empty: weight of each sample's measurement noise, R_k = r·rw_k.
@@ -228,66 +241,26 @@ def kf_innovations(phi, q, p0, r, Y, rw=None):
     return E, f
 
 
-@njit(cache=True, nogil=True)
-def kf_filtered_states(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
+def kf_filtered_states(phi, q, p0, r, rw, y):
     """Filtered states ``x_{k|k}`` (N, n) of the diagonal model of :func:`kf_run`.
 
     NaN ``y`` = missing (the state is then the prediction ``x_{k|k-1}``). The h-step
-    prediction of the signal from time k is ``sum_i phi_i^h x_{i,k|k}``.
+    prediction of the signal from time k is ``sum_i phi_i^h x_{i,k|k}``. The smoother's
+    forward pass computes them (one compiled kernel for both: a first run compiles one
+    less).
     """
-    n = phi.shape[0]
-    N = y.shape[0]
-    out = np.empty((N, n))
-    x = np.zeros(n)
-    P = np.zeros((n, n))
-    for i in range(n):
-        P[i, i] = p0[i]
-    weighted = rw.shape[0] == N
-    PH = np.empty(n)
-    K = np.empty(n)
-    A = np.empty((n, n))
-    AH = np.empty(n)
-    for k in range(N):
-        if not np.isnan(y[k]):
-            rk = r * rw[k] if weighted else r
-            f = rk
-            for i in range(n):
-                s = 0.0
-                for j in range(n):
-                    s += P[i, j]
-                PH[i] = s
-                f += s
-            if f > 0.0:
-                hx = 0.0
-                for i in range(n):
-                    hx += x[i]
-                e = y[k] - hx
-                for i in range(n):
-                    K[i] = PH[i] / f
-                    x[i] += K[i] * e
-                # Joseph form with H = 1' written out (measured: the general
-                # joseph_update's multiply by H costs this loop 50 %, kf_run 2x)
-                for i in range(n):
-                    for j in range(n):
-                        A[i, j] = P[i, j] - K[i] * PH[j]
-                for i in range(n):
-                    s = 0.0
-                    for j in range(n):
-                        s += A[i, j]
-                    AH[i] = s
-                joseph_finish(P, A, AH, K, rk)
-        for i in range(n):
-            out[k, i] = x[i]
-        for i in range(n):
-            x[i] *= phi[i]
-            for j in range(n):
-                P[i, j] *= phi[i] * phi[j]
-            P[i, i] += q[i]
-    return out
+    return rts_forward(writable(phi), writable(q), writable(p0), float(r), writable(rw),
+                       writable(y))[2]
+
+
+def first_order_response(u, phi, a0, a1, x0):
+    """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k: :func:`_first_order_response`
+    on a writable ``u``."""
+    return _first_order_response(writable(u), float(phi), float(a0), float(a1), float(x0))
 
 
 @njit(cache=True, nogil=True)
-def first_order_response(u, phi, a0, a1, x0):  # pragma: no cover - compiled
+def _first_order_response(u, phi, a0, a1, x0):  # pragma: no cover - compiled
     """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k  (exact discretisation, FOH input)."""
     N = u.shape[0]
     x = np.empty(N)
@@ -354,61 +327,3 @@ def foh_weights(beta: float, dt: float) -> tuple[float, float, float]:
     else:
         a0 = (1.0 - phi * (1.0 + x)) / (beta * x)
     return phi, float(a0), float(total - a0)
-
-
-@njit(cache=True, nogil=True)
-def kf_smooth(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
-    """Fixed-interval (Rauch-Tung-Striebel) smoother of the diagonal model of :func:`kf_run`.
-
-    Returns ``(s, v)``: the smoothed signal ``s_k = H x_{k|N}`` (sum of the stochastic
-    states) and its variance ``v_k = H P_{k|N} H'``, shape (N,). NaN ``y`` = missing.
-
-        forward:  x_{k|k-1}, P_{k|k-1}, x_{k|k}, P_{k|k}   (Joseph form)
-        backward: J_k = P_{k|k} F' P_{k+1|k}^+
-                  x_{k|N} = x_{k|k} + J_k (x_{k+1|N} - x_{k+1|k})
-                  P_{k|N} = P_{k|k} + J_k (P_{k+1|N} - P_{k+1|k}) J_k'
-    """
-    n = phi.shape[0]
-    N = y.shape[0]
-    xp = np.zeros((N, n))
-    Pp = np.zeros((N, n, n))
-    xf = np.zeros((N, n))
-    Pf = np.zeros((N, n, n))
-    x = np.zeros(n)
-    P = np.zeros((n, n))
-    for i in range(n):
-        P[i, i] = p0[i]
-    weighted = rw.shape[0] == N
-    for k in range(N):
-        xp[k] = x
-        Pp[k] = P
-        if not np.isnan(y[k]):
-            rk = r * rw[k] if weighted else r
-            PH = P.sum(axis=1)
-            f = PH.sum() + rk
-            K = PH / f
-            e = y[k] - x.sum()
-            x = x + K * e
-            A = P - np.outer(K, PH)
-            AH = A.sum(axis=1)
-            P = A - np.outer(AH, K) + rk * np.outer(K, K)
-            P = 0.5 * (P + P.T)
-        xf[k] = x
-        Pf[k] = P
-        x = phi * x
-        P = P * np.outer(phi, phi)
-        for i in range(n):
-            P[i, i] += q[i]
-    s = np.empty(N)
-    v = np.empty(N)
-    xs = xf[N - 1].copy()
-    Ps = Pf[N - 1].copy()
-    s[N - 1] = xs.sum()
-    v[N - 1] = Ps.sum()
-    for k in range(N - 2, -1, -1):
-        J = (Pf[k] * phi[np.newaxis, :]) @ np.linalg.pinv(Pp[k + 1])
-        xs = xf[k] + J @ (xs - xp[k + 1])
-        Ps = Pf[k] + J @ (Ps - Pp[k + 1]) @ J.T
-        s[k] = xs.sum()
-        v[k] = Ps.sum()
-    return s, v

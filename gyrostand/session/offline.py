@@ -64,11 +64,19 @@ def run_replay(cfg: SessionConfig,
     try:
         with Pipeline(cfg, run_dir, NullSink(), source=f"replay of {what}") as pipe:
             log.info("replaying %s into %s", what, run_dir)
-            with progress.stage("replay", "stream", unit="bins") as bar:
+            span = _stream_span(source) if progress.drawing() else None
+            total = None if span is None else max(round(span[1] - span[0]), 1)
+            with progress.stage("replay", "stream", total=total,
+                                unit="bins" if span is None else "s of log") as bar:
                 for bins in replay(source, pipe.ingest, realtime=realtime, speed=speed,
                                    pump_every=pump_every, parallel=parallel, damage=damage):
                     pipe.step(bins)
-                    bar.update(len(bins))
+                    if total is None or span is None:
+                        bar.update(len(bins))
+                    elif bins:  # the log's time read so far: an ETA from its header
+                        bar.update_to(min(round(bins[-1].t - span[0]), total))
+                if total is not None:
+                    bar.update_to(total)
                 pipe.step([])
             if damage.total:
                 log.warning("%s: %d damaged part(s) of the log skipped (%d containers, %d "
@@ -127,6 +135,27 @@ def log_samples(cfg: SessionConfig, log_path: str | Path | Sequence[str | Path]
         t.setflags(write=False)
         out[g] = s.replace(t=t)
     return out
+
+
+def _stream_span(source: Any) -> tuple[float, float] | None:
+    """The frame time a replay's logs cover, from their BLF headers (no frame read), for
+    its progress bar's total; None when a log is no BLF or a header lacks it."""
+    paths = [source] if isinstance(source, str | Path) else source
+    if not isinstance(paths, list) or not paths or not all(
+            Path(p).suffix.lower() == ".blf" for p in paths):
+        return None
+    spans = []
+    for p in paths:
+        try:
+            reader = can.BLFReader(p)
+            first, last = float(reader.start_timestamp), float(reader.stop_timestamp)
+            reader.stop()
+        except Exception:  # noqa: BLE001 - the replay itself names a damaged file
+            return None
+        if not 0 < first <= last:
+            return None
+        spans.append((first, last))
+    return min(a for a, _ in spans), max(b for _, b in spans)
 
 
 def log_span(path: str | Path) -> tuple[float, float] | None:

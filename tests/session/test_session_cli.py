@@ -104,19 +104,19 @@ def test_the_demo_runs_the_loop_the_product_exists_for(tmp_path, capsys):
 def test_the_compile_clock_counts_a_compilation_and_names_it():
     from numba import njit
 
-    from gyrostand.cli.demo import _CompileClock
+    from gyrostand.cli.compiling import CompileClock
 
     @njit
     def never_cached_kernel(x):
         return x * 2.0 + 1.0
 
-    with _CompileClock() as clock:
+    with CompileClock() as clock:
         assert never_cached_kernel(1.5) == 4.0
         assert never_cached_kernel(2.5) == 6.0  # the same signature: no second compile
     assert clock.kernels == 1 and clock.seconds > 0
     assert clock.names == ["never_cached_kernel"]
     assert "1 kernel compilation(s)" in clock.line() and "never_cached_kernel" in clock.line()
-    with _CompileClock() as again:
+    with CompileClock() as again:
         never_cached_kernel(3.5)
     assert again.kernels == 0 and "nothing compiled" in again.line()
 

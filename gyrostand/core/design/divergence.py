@@ -217,9 +217,11 @@ def _spectrum(model: Model, params: Mapping[str, float], dt: float, w: np.ndarra
 
 def tally_wins(other: str, lrs: Sequence[float], failed: int, penalty: float) -> dict[str, Any]:
     """A verify's tally of one direction: how often the right model wins, by LR (> 0) and
-    by BIC (> ``penalty``), and the mean LR of the sets whose fits did not fail."""
+    by BIC (> ``penalty``), the mean LR of the sets whose fits did not fail, and each set's
+    LR (for the realised gain's interval, :mod:`.realised`)."""
     arr = np.asarray(lrs)
     return {"fitted_by": other, "failed": failed,
             "right_wins_lr": float(np.mean(arr > 0)) if arr.size else None,
             "right_wins_bic": float(np.mean(arr > penalty)) if arr.size else None,
-            "mean_lr": float(np.mean(arr)) if arr.size else None}
+            "mean_lr": float(np.mean(arr)) if arr.size else None,
+            "lrs": [float(x) for x in arr]}

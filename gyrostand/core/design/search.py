@@ -14,10 +14,12 @@ with s the step's slope and φ = e^{−Δt/τ},
     T_c[k] = T_s[k] − sτ + φ (T_c[k−1] − T_s[k−1] + sτ),
 
 and the model sees T_c. The information a program gives is the expected Fisher
-information I(θ) of the exact likelihood on T_c (:func:`~gyrostand.core.design.fisher.fisher_information`;
-its block of the linear coefficients is exact, the rest a Monte Carlo average over
-``n_mc`` simulated records with common random numbers, so the objective is a smooth,
-deterministic function of the program). Goals, minimized over the program:
+information I(θ) of the exact likelihood on T_c (:func:`~gyrostand.core.design.fisher.information`:
+the part the program changes is exact, a Kalman pass over the derivatives of the mean
+response; the noise's part does not depend on the program and is a Monte Carlo average
+over ``n_mc_report`` records computed once and shared by every program evaluated, so the
+objective is a smooth, deterministic function of the program). Goals, minimized over the
+program:
 
     d-optimal     ln det (I⁻¹)_SS               (the parameters in doubt S, jointly;
                                                  the other parameters stay free: D_s)
@@ -26,13 +28,15 @@ deterministic function of the program). Goals, minimized over the program:
 
 The search: the program is a point z ∈ ℝ^{3·legs} (targets and rates through logistic
 maps into their boxes, soak shares through a softmax), Powell's method from the best few
-of the standard cycle, zigzags between the range's ends and seeded random programs; a program whose ramps do not fit in D with
-s_min soaks is infeasible (penalized by its excess).
+of the standard cycle, zigzags between the range's ends and seeded random programs (the
+starts run side by side on threads: the Kalman kernels release the GIL); a program whose
+ramps do not fit in D with s_min soaks is infeasible (penalized by its excess).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -41,10 +45,11 @@ import numpy as np
 from ...errors import ModelError
 from ..model import Model
 from ..profiles import TemperatureProfile
-from .fisher import fisher_information
+from .fisher import information, noise_information
 
 __all__ = ["ChamberLimits", "Program", "DesignResult", "case_temperature",
-           "standard_cycle", "zigzag", "predicted_std", "design", "search", "GOALS"]
+           "standard_cycle", "zigzag", "predicted_std", "design", "search", "search_budget",
+           "GOALS"]
 
 GOALS = ("d-optimal", "worst", "std:NAME")
 #: the standard chamber cycle's ramp rate, °C/s (0.5 °C/min)
@@ -215,15 +220,17 @@ def predicted_std(model: Model, params: Mapping[str, float], case: np.ndarray,
                   limits: ChamberLimits, *, free: Sequence[str] | None = None,
                   n_mc: int = 40, seed: int = 12345) -> dict[str, float]:
     """√CRLB of each free parameter for a record on the case temperature ``case``."""
-    return _information(model, params, case, limits, free, n_mc, seed)[0]
+    return _information(model, params, case, limits, free, None, n_mc, seed)[0]
 
 
 def _information(model: Model, params: Mapping[str, float], case: np.ndarray,
-                 limits: ChamberLimits, free: Sequence[str] | None, n_mc: int, seed: int
+                 limits: ChamberLimits, free: Sequence[str] | None,
+                 noise: np.ndarray | None, n_mc: int, seed: int
                  ) -> tuple[dict[str, float], np.ndarray, tuple[str, ...]]:
-    """(√CRLB per free parameter, the information I, its parameter names)."""
-    info, names = fisher_information(model, params, limits.grid, case, dt=limits.dt,
-                                     free=free, n_mc=n_mc, seed=seed)
+    """(√CRLB per free parameter, the information I, its parameter names); ``noise``: the
+    noise's part of I, shared by every program on the grid (else computed here)."""
+    info, names = information(model, params, limits.grid, case, dt=limits.dt, free=free,
+                              noise=noise, n_mc=n_mc, seed=seed)
     C = _inverse(info)
     std = {n: float(math.sqrt(C[i, i])) if C[i, i] > 0 else math.inf
            for i, n in enumerate(names)}
@@ -281,21 +288,37 @@ def goal_function(goal: str, model: Model, params: Mapping[str, float],
     raise ModelError(f"design goal {goal!r}: use d-optimal, worst or std:PARAM")
 
 
+def search_budget(limits: ChamberLimits, *, starts: int = 3, maxfev: int = 120) -> int:
+    """About how many programs :func:`search` evaluates (the progress bar's total; Powell
+    stops a start early when it converges, and may overrun its ``maxfev`` by a line search)."""
+    return 5 + starts + (max(starts, 1) + 1) * maxfev
+
+
 def search(objective: Callable[[np.ndarray], float], limits: ChamberLimits,
            reference: Program, *, starts: int = 3, maxfev: int = 120, seed: int = 1,
-           progress: Callable[[int], None] | None = None) -> tuple[Program, int]:
+           progress: Callable[[int], None] | None = None, workers: int = 2
+           ) -> tuple[Program, int]:
     """The program whose case temperature minimizes ``objective(case)`` (see the module
     docstring's search), and how many programs it evaluated. Every goal's search: the
-    information goals of :func:`design` and the separation of :mod:`.separation`."""
+    information goals of :func:`design` and the separation of :mod:`.separation`.
+
+    The Powell searches from the best starts run on ``workers`` threads (``objective``
+    must be safe to call from several threads: the Kalman kernels release the GIL); each
+    start is deterministic, and the best is refined from the best start's optimum, so
+    the result does not depend on ``workers``."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from scipy.optimize import minimize
 
     count = [0]
+    lock = threading.Lock()
 
     def f(z: np.ndarray) -> float:
         prog = program_of(z, limits)
-        count[0] += 1
-        if progress is not None:
-            progress(1)
+        with lock:
+            count[0] += 1
+            if progress is not None:
+                progress(1)
         if prog.excess > 0:  # ramps too slow for the duration: push back, smoothly
             return 1e3 + prog.excess / limits.duration * 1e3
         val = objective(case_temperature(prog.setpoint(limits.duration), limits))
@@ -310,11 +333,21 @@ def search(objective: Callable[[np.ndarray], float], limits: ChamberLimits,
     cands += [rng.normal(0.0, 1.5, dim) for _ in range(starts)]
     scored = sorted(((f(x), i) for i, x in enumerate(cands)))
     best_v, best_x = scored[0][0], cands[scored[0][1]]
-    for _, i in scored[:max(starts, 1)]:
+
+    def powell(i: int) -> tuple[float, np.ndarray]:
         res = minimize(f, cands[i], method="Powell",
                        options={"maxfev": maxfev, "xtol": 1e-2, "ftol": 1e-4})
-        if res.fun < best_v:
-            best_x, best_v = res.x, float(res.fun)
+        return float(res.fun), res.x
+
+    firsts = [i for _, i in scored[:max(starts, 1)]]
+    if workers > 1 and len(firsts) > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            done = list(pool.map(powell, firsts))
+    else:
+        done = [powell(i) for i in firsts]
+    for val, x in done:  # in the starts' order: the same result on any number of workers
+        if val < best_v:
+            best_x, best_v = x, val
     res = minimize(f, best_x, method="Powell",
                    options={"maxfev": maxfev, "xtol": 1e-3, "ftol": 1e-5})
     if res.fun < best_v:
@@ -350,38 +383,41 @@ class DesignResult:
 
 def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
            goal: str = "d-optimal", free: Sequence[str] | None = None,
-           doubt: Sequence[str] | None = None, reference: Program | None = None, starts: int = 3, maxfev: int = 120,
-           n_mc_search: int = 3, n_mc_report: int = 40, seed: int = 1,
-           progress: Callable[[int], None] | None = None) -> DesignResult:
+           doubt: Sequence[str] | None = None, reference: Program | None = None,
+           starts: int = 3, maxfev: int = 120, n_mc_report: int = 40, seed: int = 1,
+           progress: Callable[[int], None] | None = None, workers: int = 2) -> DesignResult:
     """Search the program that minimizes ``goal`` (see the module docstring).
 
     ``starts``: random starts besides the reference; ``maxfev``: evaluations per start
-    (the best start is refined with as many again); ``progress(n)`` after each evaluation.
-    The search averages the information over ``n_mc_search`` records, the report over
-    ``n_mc_report``; a designed program the report does not find better than the reference
-    is replaced by the reference (the result then says so: ``program is reference``).
+    (the best start is refined with as many again); ``progress(n)`` after each evaluation;
+    ``workers``: threads for the starts. The noise's part of the information is averaged
+    over ``n_mc_report`` records once, and shared by the search and the report; a
+    designed program the report does not find better than the reference is replaced by
+    the reference (the result then says so: ``program is reference``).
     """
     model.check_params({**model.defaults, **params})
     f_goal = goal_function(goal, model, params, free, doubt)
     ref = reference or standard_cycle(limits)
+    noise = noise_information(model, params, limits.grid.size, dt=limits.dt, free=free,
+                              n_mc=n_mc_report, seed=seed + 1)[0]
 
     def objective(case: np.ndarray) -> float:
-        info, names = fisher_information(model, params, limits.grid, case, dt=limits.dt,
-                                         free=free, n_mc=n_mc_search, seed=seed)
+        info, names = information(model, params, limits.grid, case, dt=limits.dt,
+                                  free=free, noise=noise)
         return f_goal(info, names)
 
     prog, count = search(objective, limits, ref, starts=starts, maxfev=maxfev, seed=seed,
-                         progress=progress)
+                         progress=progress, workers=workers)
 
     def report(p: Program) -> tuple[dict[str, float], float]:
         case = case_temperature(p.setpoint(limits.duration), limits)
-        std, info, names = _information(model, params, case, limits, free, n_mc_report,
-                                        seed + 1)
+        std, info, names = _information(model, params, case, limits, free, noise,
+                                        n_mc_report, seed + 1)
         return std, float(f_goal(info, names))
 
     std, val = report(prog)
     ref_std, ref_val = report(ref)
-    if not val < ref_val:  # the search's cheaper information misled it: never propose worse
+    if not val < ref_val:  # never propose a program no better than the reference
         prog, std, val = ref, ref_std, ref_val
     return DesignResult(goal, prog, ref, std, ref_std, val, ref_val, count,
                         params={n: float(params[n]) for n in std},

@@ -180,7 +180,7 @@ def separate(r: Rivals, limits: ChamberLimits, *, reference: Program | None = No
         return -math.log(lam) if lam > 0 else math.inf
 
     prog, count = search(objective, limits, ref, starts=starts, maxfev=maxfev, seed=seed,
-                         progress=progress)
+                         progress=progress, workers=1)  # one thread: ``warm`` is shared
     lam = expected_lr(r, grid, case_temperature(prog.setpoint(limits.duration), limits),
                       limits.dt)
     ref_prog = expected_lr(r, grid, case_temperature(ref.setpoint(limits.duration), limits),

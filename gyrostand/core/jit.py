@@ -1,0 +1,106 @@
+"""numba's compiled kernels: where they are cached, and who hears of a compilation.
+
+Every kernel (:mod:`.kalman`, :mod:`.rts`, :mod:`.lkf.kernel`) is ``njit(cache=True)``
+without a signature: numba compiles it on its first call, for the argument types of that
+call, and writes the machine code to its cache, so a later process loads it (tens of ms)
+instead of compiling it again (0.2-2 s each). A command compiles only the kernels it
+calls.
+
+Where the cache lives (issue 25): beside the package (``gyrostand/core/__pycache__``,
+numba's default) when the package's folders are writable, else the user's cache folder
+``$XDG_CACHE_HOME/gyrostand/numba`` (``~/.cache/gyrostand/numba``): :func:`choose_cache_dir`
+sets ``NUMBA_CACHE_DIR`` to it before numba is imported (importing :mod:`gyrostand.core`
+does). A ``NUMBA_CACHE_DIR`` the user set is kept.
+
+Who hears of a compilation: :func:`watch` adds a callback told ``(kernel, True)`` when an
+outermost compilation starts and ``(kernel, False)`` when it ends (the command line shows
+it as progress); the kernels' modules call :func:`listen` when they load, which forwards
+numba's ``numba:compile`` events to the callbacks. numba compiles one function at a time
+(its compiler lock), so one depth counter serves every thread.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["cache_dir", "choose_cache_dir", "listen", "user_cache_dir", "watch"]
+
+#: the folders whose kernels numba caches beside their source by default
+KERNEL_DIRS = (Path(__file__).resolve().parent, Path(__file__).resolve().parent / "lkf")
+
+Watcher = Callable[[str, bool], None]
+_watchers: list[Watcher] = []
+_state: dict[str, Any] = {"listening": False, "depth": 0}
+
+
+def user_cache_dir() -> Path:
+    """The user's cache folder for gyrostand's kernels (XDG: ``$XDG_CACHE_HOME`` else
+    ``~/.cache``, then ``gyrostand/numba``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "gyrostand" / "numba"
+
+
+def _writable(folder: Path) -> bool:
+    cache = folder / "__pycache__"
+    return os.access(cache if cache.is_dir() else folder, os.W_OK)
+
+
+def choose_cache_dir() -> None:
+    """Point numba at :func:`user_cache_dir` when a kernel folder of the package is not
+    writable (a system-wide or read-only install), unless ``NUMBA_CACHE_DIR`` is set or
+    numba is already imported (its configuration is read once, on import)."""
+    if "NUMBA_CACHE_DIR" in os.environ or "numba" in sys.modules:
+        return
+    if not all(_writable(d) for d in KERNEL_DIRS):
+        os.environ["NUMBA_CACHE_DIR"] = str(user_cache_dir())
+
+
+def cache_dir() -> Path:
+    """Where this process's compiled kernels are cached."""
+    given = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(given) if given else KERNEL_DIRS[0] / "__pycache__"
+
+
+def watch(callback: Watcher) -> Callable[[], None]:
+    """Tell ``callback(kernel, started)`` of every outermost compilation from now on;
+    returns the function that stops it."""
+    _watchers.append(callback)
+
+    def unwatch() -> None:
+        if callback in _watchers:
+            _watchers.remove(callback)
+
+    return unwatch
+
+
+def _kernel(ev: Any) -> str:
+    fn = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+    return str(getattr(fn, "__name__", "kernel")).lstrip("_")
+
+
+def listen() -> None:
+    """Forward numba's compile events to the watchers (once per process; the kernels'
+    modules call it when they load, after numba is imported)."""
+    if _state["listening"]:
+        return
+    from numba.core import event
+
+    class _Forward(event.Listener):  # type: ignore[misc]
+        def on_start(self, ev: Any) -> None:
+            _state["depth"] += 1
+            if _state["depth"] == 1:
+                for w in list(_watchers):
+                    w(_kernel(ev), True)
+
+        def on_end(self, ev: Any) -> None:
+            _state["depth"] -= 1
+            if _state["depth"] == 0:
+                for w in list(_watchers):
+                    w(_kernel(ev), False)
+
+    event.register("numba:compile", _Forward())
+    _state["listening"] = True

@@ -1,0 +1,180 @@
+"""The fixed-interval (Rauch-Tung-Striebel) smoother of the stochastic part of a model,
+as two compiled loops of scalars and one batched numpy pseudo-inverse between them.
+
+It is the kernel of :mod:`gyrostand.core.kalman`'s diagonal model (independent scalar
+Gauss-Markov / random-walk states observed through their sum), imported from there as
+``kf_smooth``. Its compiled parts use loops only: numba's own ``pinv``, ``outer`` and
+``sum(axis)`` cost the one-kernel form 11-14 s of compilation on a first run (issue 25),
+these loops about a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .jit import listen
+
+listen()  # a compilation is shown as progress (jit.watch)
+
+
+def writable(a):
+    """``a`` as a writable C-contiguous float array: numba compiles a kernel once per
+    argument type, and a read-only array (a frozen :class:`~gyrostand.core.data.Samples`'
+    column) is another type; one copy of a read-only input costs far less than a second
+    compilation (0.9-1.8 s for :func:`~gyrostand.core.kalman.kf_run`)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a if a.flags.writeable else a.copy()
+
+
+def kf_smooth(phi, q, p0, r, rw, y):
+    """Fixed-interval (Rauch-Tung-Striebel) smoother of the diagonal model of
+    :func:`~gyrostand.core.kalman.kf_run`.
+
+    Returns ``(s, v)``: the smoothed signal ``s_k = H x_{k|N}`` (sum of the stochastic
+    states) and its variance ``v_k = H P_{k|N} H'``, shape (N,). NaN ``y`` = missing.
+
+        forward:  x_{k|k-1}, P_{k|k-1}, x_{k|k}, P_{k|k}   (Joseph form)
+        backward: J_k = P_{k|k} F' P_{k+1|k}^+
+                  x_{k|N} = x_{k|k} + J_k (x_{k+1|N} - x_{k+1|k})
+                  P_{k|N} = P_{k|k} + J_k (P_{k+1|N} - P_{k+1|k}) J_k'
+
+    The two passes are compiled loops of scalars; the gains ``J_k`` are one batched numpy
+    pseudo-inverse of the stacked ``P_{k+1|k}`` between them (numba's own ``pinv``,
+    ``outer`` and ``sum(axis)`` cost this kernel 11-14 s of compilation on a first run;
+    these loops compile in about a second).
+    """
+    phi = writable(phi)
+    xp, Pp, xf, Pf = rts_forward(phi, writable(q), writable(p0), float(r), writable(rw),
+                                  writable(y))
+    N = xp.shape[0]
+    J = np.empty_like(Pf)
+    if N > 1:
+        J[:-1] = (Pf[:-1] * phi[np.newaxis, np.newaxis, :]) @ np.linalg.pinv(Pp[1:])
+    return _rts_backward(xp, Pp, xf, Pf, J)
+
+
+@njit(cache=True, nogil=True)
+def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
+    """The filter of :func:`kf_smooth`: ``x_{k|k-1}, P_{k|k-1}, x_{k|k}, P_{k|k}``, shapes
+    (N, n), (N, n, n), (N, n), (N, n, n); where ``y`` is NaN (or the innovation variance
+    is not positive) the filtered values are the predicted ones."""
+    n = phi.shape[0]
+    N = y.shape[0]
+    xp = np.zeros((N, n))
+    Pp = np.zeros((N, n, n))
+    xf = np.zeros((N, n))
+    Pf = np.zeros((N, n, n))
+    x = np.zeros(n)
+    P = np.zeros((n, n))
+    PH = np.empty(n)
+    K = np.empty(n)
+    A = np.empty((n, n))
+    AH = np.empty(n)
+    for i in range(n):
+        P[i, i] = p0[i]
+    weighted = rw.shape[0] == N
+    for k in range(N):
+        for i in range(n):
+            xp[k, i] = x[i]
+            for j in range(n):
+                Pp[k, i, j] = P[i, j]
+        if not np.isnan(y[k]):
+            rk = r * rw[k] if weighted else r
+            # f = H P H' + R_k, H = [1, ..., 1];  K = P H' / f ;  x = x + K (y - H x)
+            f = rk
+            hx = 0.0
+            for i in range(n):
+                s = 0.0
+                for j in range(n):
+                    s += P[i, j]
+                PH[i] = s
+                f += s
+                hx += x[i]
+            if f > 0.0:  # (else a degenerate variance: the prediction stands)
+                e = y[k] - hx
+                for i in range(n):
+                    K[i] = PH[i] / f
+                    x[i] += K[i] * e
+                # Joseph form: A = (I - K H) P ;  P = A (I - K H)' + K R K', symmetric
+                for i in range(n):
+                    for j in range(n):
+                        A[i, j] = P[i, j] - K[i] * PH[j]
+                for i in range(n):
+                    s = 0.0
+                    for j in range(n):
+                        s += A[i, j]
+                    AH[i] = s
+                for i in range(n):
+                    for j in range(n):
+                        P[i, j] = A[i, j] - AH[i] * K[j] + K[i] * rk * K[j]
+                for i in range(n):
+                    for j in range(i + 1, n):
+                        m = 0.5 * (P[i, j] + P[j, i])
+                        P[i, j] = m
+                        P[j, i] = m
+        for i in range(n):
+            xf[k, i] = x[i]
+            for j in range(n):
+                Pf[k, i, j] = P[i, j]
+        # predict: x = F x ;  P = F P F' + Q  (F, Q diagonal)
+        for i in range(n):
+            x[i] *= phi[i]
+            for j in range(n):
+                P[i, j] *= phi[i] * phi[j]
+            P[i, i] += q[i]
+    return xp, Pp, xf, Pf
+
+
+@njit(cache=True, nogil=True)
+def _rts_backward(xp, Pp, xf, Pf, J):  # pragma: no cover - compiled
+    """The backward pass of :func:`kf_smooth` given the gains ``J_k`` (N, n, n)."""
+    N, n = xf.shape
+    s = np.empty(N)
+    v = np.empty(N)
+    xs = np.empty(n)
+    Ps = np.empty((n, n))
+    d = np.empty(n)
+    D = np.empty((n, n))
+    JD = np.empty((n, n))
+    tot_x = 0.0
+    tot_p = 0.0
+    for i in range(n):
+        xs[i] = xf[N - 1, i]
+        tot_x += xs[i]
+        for j in range(n):
+            Ps[i, j] = Pf[N - 1, i, j]
+            tot_p += Ps[i, j]
+    s[N - 1] = tot_x
+    v[N - 1] = tot_p
+    for k in range(N - 2, -1, -1):
+        # x_{k|N} = x_{k|k} + J_k (x_{k+1|N} - x_{k+1|k})
+        for i in range(n):
+            d[i] = xs[i] - xp[k + 1, i]
+            for j in range(n):
+                D[i, j] = Ps[i, j] - Pp[k + 1, i, j]
+        tot_x = 0.0
+        for i in range(n):
+            a = xf[k, i]
+            for j in range(n):
+                a += J[k, i, j] * d[j]
+            xs[i] = a
+            tot_x += a
+        # P_{k|N} = P_{k|k} + J_k (P_{k+1|N} - P_{k+1|k}) J_k'
+        for i in range(n):
+            for j in range(n):
+                a = 0.0
+                for m in range(n):
+                    a += J[k, i, m] * D[m, j]
+                JD[i, j] = a
+        tot_p = 0.0
+        for i in range(n):
+            for j in range(n):
+                a = Pf[k, i, j]
+                for m in range(n):
+                    a += JD[i, m] * J[k, j, m]
+                Ps[i, j] = a
+                tot_p += a
+        s[k] = tot_x
+        v[k] = tot_p
+    return s, v

@@ -1,0 +1,74 @@
+"""What a design will realise (#24 item 7): the verify's gain with a bootstrap interval
+as the headline; an expected-LR ratio over a reference below 1 never quoted as a gain."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrostand.core.design.realised import (
+    bootstrap_ratio,
+    expected_gain,
+    gain_words,
+    realised_lr_gain,
+    realised_std_gain,
+)
+
+
+def test_an_expected_lr_below_one_carries_no_gain():
+    # the trend vs warm-up protocol: 63 over 0.315 was quoted as "200x"; verify realised 42x
+    assert expected_gain(63.0, 0.315) is None
+    assert gain_words(63.0, 0.315) == "expected LR 63 vs 0.315"
+    assert expected_gain(51.2, 9.49) == pytest.approx(5.395, abs=1e-3)
+    assert gain_words(51.2, 9.49) == "gain 5.40x (expected LR 51.2 vs 9.49)"
+
+
+def test_the_bootstrap_interval_holds_the_ratio_and_shrinks_with_more_runs():
+    rng = np.random.default_rng(3)
+
+    def mean(groups):
+        return float(np.mean(groups[0]))
+
+    small = bootstrap_ratio(mean, [rng.normal(20, 5, 20)], [rng.normal(10, 5, 20)])
+    big = bootstrap_ratio(mean, [rng.normal(20, 5, 500)], [rng.normal(10, 5, 500)])
+    for value, lo, hi in (small, big):
+        assert lo < value < hi
+    assert big[2] - big[1] < 0.5 * (small[2] - small[1])
+    assert big[1] < 2.0 < big[2]  # the true ratio, 20/10
+    same = bootstrap_ratio(mean, [np.full(5, 4.0)], [np.full(5, 2.0)])
+    assert same == (2.0, 2.0, 2.0)
+
+
+def test_the_separation_gain_is_the_ratio_of_the_summed_mean_lrs():
+    v = {"runs": 4,
+         "designed": {"a": {"lrs": [30.0, 20.0, 25.0, 27.0]}, "b": {"lrs": [5.0, 6.0, 4.0, 5.0]}},
+         "reference": {"a": {"lrs": [10.0, 8.0, 9.0, 11.0]}, "b": {"lrs": [1.0, 0.5, 1.5, 1.0]}}}
+    g = realised_lr_gain(v, ("a", "b"))
+    assert g["ratio"] == pytest.approx((25.5 + 5.0) / (9.5 + 1.0))
+    lo, hi = g["interval"]
+    assert lo < g["ratio"] < hi and g["runs"] == 4 and g["level"] == 0.95
+    assert realised_lr_gain({"runs": 1, "designed": {}, "reference": {}}, ("a", "b")) is None
+
+
+def test_the_std_gain_is_the_worst_relative_std_reference_over_designed():
+    rng = np.random.default_rng(5)
+    params = {"k": 5.0, "h": 0.05}
+    designed = {"k": list(rng.normal(5, 0.5, 30)), "h": list(rng.normal(0.05, 0.002, 30))}
+    reference = {"k": list(rng.normal(5, 1.5, 30)), "h": list(rng.normal(0.05, 0.004, 30))}
+    g = realised_std_gain(designed, reference, ("k", "h"), params)
+    worst_d = max(np.std(designed["k"], ddof=1) / 5, np.std(designed["h"], ddof=1) / 0.05)
+    worst_r = max(np.std(reference["k"], ddof=1) / 5, np.std(reference["h"], ddof=1) / 0.05)
+    assert g["ratio"] == pytest.approx(worst_r / worst_d)
+    assert g["interval"][0] < g["ratio"] < g["interval"][1]
+    assert realised_std_gain({"k": [1.0]}, {"k": [1.0]}, ("k",), params) is None
+
+
+def test_the_interval_is_seeded():
+    rng = np.random.default_rng(9)
+    a, b = [rng.normal(20, 5, 20)], [rng.normal(10, 5, 20)]
+
+    def mean(groups):
+        return float(np.mean(groups[0]))
+
+    assert bootstrap_ratio(mean, a, b) == bootstrap_ratio(mean, a, b)
+    assert bootstrap_ratio(mean, a, b, seed=1) != bootstrap_ratio(mean, a, b)
