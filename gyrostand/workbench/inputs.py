@@ -141,7 +141,7 @@ def _session_unit(info: dict[str, Any], gyro: str) -> str:
         return DRIFT_UNIT
     try:
         cfg = load_config(path)
-        return cfg.gyro(gyro).drift.signal.unit or DRIFT_UNIT
+        return cfg.gyro(gyro).drift.unit or DRIFT_UNIT
     except (GyrostandError, OSError, ValueError, KeyError) as exc:
         log.info("drift unit unknown (session %s not readable: %s)", path, exc)
         return DRIFT_UNIT
@@ -195,7 +195,7 @@ def _log_input(path: Path, gyro: str | None, config: str | Path | None) -> Input
                         f"of {cfg.path})")
     g = cfg.gyro(name)
     return Input(series[name], name, tuple(Model.parse(list(g.model)).names),
-                 csv_ledger_path(path), None, "log", g.drift.signal.unit or DRIFT_UNIT)
+                 csv_ledger_path(path), None, "log", g.drift.unit or DRIFT_UNIT)
 
 
 def _parquet_input(path: Path, gyro: str | None, dt: float | None) -> Input:
