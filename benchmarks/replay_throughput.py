@@ -41,6 +41,9 @@ import copy
 import logging
 import os
 import resource
+import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -62,6 +65,12 @@ FOREIGN_DBC = ROOT / "benchmarks" / "data" / "foreign_triad.dbc"
 
 
 def triad_cfg(frames: int, out: Path, layout: str = "ours"):
+    return parse_config(triad_dict(frames, out, layout), source=str(TRIAD),
+                        base_dir=TRIAD.parent)
+
+
+def triad_dict(frames: int, out: Path, layout: str = "ours") -> dict:
+    """The session document of :func:`triad_cfg` (its DBC path absolute)."""
     d = yaml.safe_load(TRIAD.read_text())
     d = copy.deepcopy(d)
     d["session"]["output"] = str(out)
@@ -77,7 +86,47 @@ def triad_cfg(frames: int, out: Path, layout: str = "ours"):
                           "counter": f"{ax}Seq"}
             g["temperature"] = {"message": f"FOG_{ax}_TEMP", "signal": f"{ax}Temp",
                                 "counter": f"{ax}TSeq"}
-    return parse_config(d, source=str(TRIAD), base_dir=TRIAD.parent)
+    else:
+        d["dbc"] = str((TRIAD.parent / d["dbc"]).resolve())
+    return d
+
+
+BARE_LOOP = "import can, sys\nfor msg in can.LogReader(sys.argv[1]):\n    pass\n"
+
+
+def _child(argv: list[str]) -> tuple[float, float]:
+    """Wall and CPU (user + sys) s of one command in a fresh process."""
+    before = os.times()
+    t = time.perf_counter()
+    p = subprocess.run(argv, capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    after = os.times()
+    if p.returncode != 0:
+        raise SystemExit(f"{argv[:4]} failed ({p.returncode}): {p.stderr[-1500:]}")
+    return wall, (after.children_user - before.children_user
+                  + after.children_system - before.children_system)
+
+
+def whole_command(layout: str, frames: int, path: Path, out: Path, pairs: int) -> None:
+    """The whole ``gyrostand replay`` command (a fresh process: imports, stream, final
+    fits, result.json, report.txt) against the bare ``for msg in can.LogReader(path)``
+    loop in a fresh process, in turn, ``pairs`` times: the ratio bare/whole pair by pair
+    (>= 1.0: the command at least as fast as the bare loop; issue 25 item 5)."""
+    cfg_path = out / f"triad_{layout}.yaml"
+    cfg_path.write_text(yaml.safe_dump(triad_dict(frames, out, layout)))
+    replay_cmd = [sys.executable, "-m", "gyrostand", "-q", "replay", str(cfg_path),
+                  str(path), "--out", str(out / "whole")]
+    bare_cmd = [sys.executable, "-c", BARE_LOOP, str(path)]
+    _child(bare_cmd)  # warm: the file in the page cache, numba's kernels in their cache
+    _child(replay_cmd)
+    rows = [(*_child(bare_cmd), *_child(replay_cmd)) for _ in range(pairs)]
+    for bw, bc, rw, rc in rows:
+        print(f"  pair: bare loop {bw:6.2f} s wall {bc:5.2f} s CPU; whole replay {rw:6.2f} s "
+              f"wall {rc:5.2f} s CPU: {bw / rw:.2f}x by wall, {bc / rc:.2f}x by CPU")
+    wall = statistics.median(r[0] / r[2] for r in rows)
+    cpu = statistics.median(r[1] / r[3] for r in rows)
+    print(f"whole command ({layout}) vs the bare loop, median of {pairs} pairs: {wall:.2f}x "
+          f"by wall, {cpu:.2f}x by CPU (anchor >= 1.0: {'PASS' if wall >= 1.0 else 'MISS'})")
 
 
 def independent(cfg, path: Path) -> float:
@@ -168,16 +217,21 @@ def _cpu() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
-def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
-    bare.cpu = float("inf")  # type: ignore[attr-defined]
-    tmp = Path(tempfile.gettempdir())
-    cfg = triad_cfg(frames, out, layout)
+def log_of(layout: str, frames: int, out: Path) -> Path:
+    """The layout's BLF of ``frames`` frames, made once (cached in the temp folder)."""
     suffix = "" if layout == "ours" else f"_{layout}"
-    path = tmp / f"gyrostand_bench_{frames}{suffix}.blf"
+    path = Path(tempfile.gettempdir()) / f"gyrostand_bench_{frames}{suffix}.blf"
     if not path.is_file():
         t = time.perf_counter()
-        n = write_log(path, simulated_frames(cfg))
+        n = write_log(path, simulated_frames(triad_cfg(frames, out, layout)))
         print(f"generated {n} frames into {path} in {time.perf_counter() - t:.1f} s")
+    return path
+
+
+def measure(layout: str, frames: int, repeat: int, out: Path) -> None:
+    bare.cpu = float("inf")  # type: ignore[attr-defined]
+    cfg = triad_cfg(frames, out, layout)
+    path = log_of(layout, frames, out)
     logging.getLogger("gyrostand").setLevel(logging.ERROR)
     best_bare = best_stream = best_inline = best_indep = best_arr = float("inf")
     best_ing = best_ing_pf = float("inf")
@@ -240,13 +294,19 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--layout", choices=("ours", "foreign", "both"), default="both")
+    ap.add_argument("--whole", type=int, default=0, metavar="PAIRS",
+                    help="only the whole command against the bare loop, PAIRS pairs each")
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
     for h in logging.getLogger().handlers:  # run.log lowers gyrostand's level to INFO
         h.setLevel(logging.ERROR)
     out = Path(tempfile.mkdtemp(prefix="gyrostand_bench_replay_"))
     for layout in (("ours", "foreign") if args.layout == "both" else (args.layout,)):
-        measure(layout, args.frames, args.repeat, out)
+        if args.whole:
+            whole_command(layout, args.frames, log_of(layout, args.frames, out), out,
+                          args.whole)
+        else:
+            measure(layout, args.frames, args.repeat, out)
         print()
 
 

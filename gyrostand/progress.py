@@ -34,7 +34,7 @@ _state: dict[str, Any] = {"on": False, "quiet": False, "stream": None}
 
 
 def configure(*, on: bool = True, quiet: bool = False, stream: IO[str] | None = None) -> None:
-    """Turn progress on for this process (the CLI does), ``quiet``: stage lines only."""
+    """Turn progress on for this process (the CLI does); ``quiet``: no bars either."""
     _state.update(on=on, quiet=quiet, stream=stream)
 
 

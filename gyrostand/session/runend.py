@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -24,6 +25,9 @@ from ..runfolder.layout import REPORT, RESULT
 from .commands import FAULT, STOPPED
 from .final import GyroFinal, fit_gyro, write_report, write_result_json
 from .online import OnlineEstimate
+
+#: threads for the gyros' final fits (a run's stand has one to a few gyros)
+FIT_WORKERS = 2
 
 if TYPE_CHECKING:
     from ..can.binning import Binner
@@ -143,8 +147,8 @@ def finish_run(pipe: Ending, reason: str, *, extra_stats: dict[str, Any] | None 
 def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEstimate]]]:
     """Per gyro: the online LKF's last re-linearisation (``lkf`` at stop), then the final
     batch fits on ``samples.csv``; the final ML as an extra estimate for the last round."""
-    finals: list[GyroFinal] = []
     extra: dict[str, list[OnlineEstimate]] = {}
+    jobs = []
     for g in pipe.cfg.gyros:
         path = pipe.files.samples.paths[g.name]
         try:
@@ -154,10 +158,21 @@ def _final_fits(pipe: Ending) -> tuple[list[GyroFinal], dict[str, list[OnlineEst
                               f"{exc.strerror or exc}") from exc
         tr = pipe.trackers[g.name]
         tr.finish()
-        f = fit_gyro(g, cols, pipe.cfg.sampling.dt,
-                     f"{pipe.run_dir.name}/{g.name}/samples.csv", None, tr.estimates(),
-                     tr.lkf_fit if "lkf" in tr.identifiers else None)
-        finals.append(f)
+        jobs.append((g, cols, f"{pipe.run_dir.name}/{g.name}/samples.csv", tr.estimates(),
+                     tr.lkf_fit if "lkf" in tr.identifiers else None))
+
+    def fit(job: tuple[Any, ...]) -> GyroFinal:
+        g, cols, source, online, lkf = job
+        return fit_gyro(g, cols, pipe.cfg.sampling.dt, source, None, online, lkf)
+
+    # the gyros' final fits side by side (each the same computation on any thread; the
+    # Kalman kernels release the GIL), in the gyros' order
+    if len(jobs) > 1:
+        with ThreadPoolExecutor(max_workers=FIT_WORKERS, thread_name_prefix="final") as pool:
+            finals = list(pool.map(fit, jobs))
+    else:
+        finals = [fit(j) for j in jobs]
+    for g, f in zip(pipe.cfg.gyros, finals, strict=True):
         ml = f.fits.get("ml")
         if ml is not None and not isinstance(ml, str):
             vals = {n: (e.value, e.std) for n, e in ml.parameters.items()}

@@ -203,56 +203,83 @@ def separate(r: Rivals, limits: ChamberLimits, *, reference: Program | None = No
 
 
 def verify(r: Rivals, records: Mapping[str, Any], n: int, *,
-           seed: int = 1, progress: Callable[[int], None] | None = None
-           ) -> dict[str, Any]:
+           seed: int = 1, progress: Callable[[int], None] | None = None,
+           workers: int = 2) -> dict[str, Any]:
     """Simulate ``n`` runs from each rival on each record (label → t, case temperature; or
     label → a list of them: ``n`` sets of several switch-ons, each run from its own
     initial state, fitted jointly by :func:`~.multirun.joint_ml`), fit both by ML (each
     search started at its own parameters) and count how often the right model wins: by
     likelihood (LR > 0) and by BIC (LR > Δp ln N, a per-run parameter counted once per
-    run); the realized mean LR = 2 (ln L_right − ln L_wrong)."""
-    from ..ml.fit import ml
-    from ..ml.joint import joint_ml
+    run); the realized mean LR = 2 (ln L_right − ln L_wrong).
+
+    The runs are simulated here in order; their fits run in ``workers`` processes (an ML
+    fit is mostly Python between compiled Kalman passes: processes, not threads, use two
+    CPUs), each the same computation wherever it runs."""
+    import multiprocessing
+    from concurrent.futures import Executor, ProcessPoolExecutor
+
     from ..ml.joint_problem import per_run_names
     from ..simulation import simulate
 
     out: dict[str, Any] = {"runs": n}
-    for k, (label, rec) in enumerate(records.items()):
-        runs = list(rec) if isinstance(rec, list) else [rec]
-        n_obs = sum(len(t) for t, _ in runs)
-        doc: dict[str, Any] = {}
-        for j, truth in enumerate((r.a, r.b)):
-            other = r.b if truth == r.a else r.a
-            mt, pt = r.side(truth)
-            mo, po = r.side(other)
-            per_t, per_o = set(per_run_names(mt)), set(per_run_names(mo))
-            n_t = sum(len(runs) if x in per_t else 1 for x in mt.param_names)
-            n_o = sum(len(runs) if x in per_o else 1 for x in mo.param_names)
-            penalty = (n_t - n_o) * math.log(n_obs)
-            rng = np.random.default_rng([seed, 1515, k, j])
-            lrs: list[float] = []
-            failed = 0
-            for _ in range(n):
-                ss = [simulate(mt, pt, t=t, temp=temp, dt=float(np.median(np.diff(t))),
-                               seed=rng) for t, temp in runs]
-                try:
-                    if len(ss) == 1:
-                        lt = ml(ss[0], mt, start=pt, **VERIFY_FIT).loglik
-                        lo = ml(ss[0], mo, start=po, **VERIFY_FIT).loglik
+    pool: Executor | None = (
+        ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        if workers > 1 else None)
+    try:
+        for k, (label, rec) in enumerate(records.items()):
+            runs = list(rec) if isinstance(rec, list) else [rec]
+            n_obs = sum(len(t) for t, _ in runs)
+            doc: dict[str, Any] = {}
+            for j, truth in enumerate((r.a, r.b)):
+                other = r.b if truth == r.a else r.a
+                mt, pt = r.side(truth)
+                mo, po = r.side(other)
+                per_t, per_o = set(per_run_names(mt)), set(per_run_names(mo))
+                n_t = sum(len(runs) if x in per_t else 1 for x in mt.param_names)
+                n_o = sum(len(runs) if x in per_o else 1 for x in mo.param_names)
+                penalty = (n_t - n_o) * math.log(n_obs)
+                rng = np.random.default_rng([seed, 1515, k, j])
+                sets = [[simulate(mt, pt, t=t, temp=temp, dt=float(np.median(np.diff(t))),
+                                  seed=rng) for t, temp in runs] for _ in range(n)]
+                jobs = [(ss, mt, pt, mo, po) for ss in sets]
+                done = pool.map(pair_lr, jobs) if pool is not None else map(pair_lr, jobs)
+                lrs: list[float] = []
+                failed = 0
+                for lr in done:
+                    if isinstance(lr, str):
+                        log.warning("verify: a fit failed: %s", lr)
+                        failed += 1
                     else:
-                        lt = joint_ml(ss, mt, start=pt, **VERIFY_FIT).loglik
-                        lo = joint_ml(ss, mo, start=po, **VERIFY_FIT).loglik
-                except GyrostandError as exc:
-                    log.warning("verify: a fit failed: %s", exc)
-                    failed += 1
-                else:
-                    assert lt is not None and lo is not None
-                    lrs.append(2.0 * (lt - lo))
-                if progress is not None:
-                    progress(1)
-            doc[truth] = tally_wins(other, lrs, failed, penalty)
-        out[label] = doc
+                        lrs.append(lr)
+                    if progress is not None:
+                        progress(1)
+                doc[truth] = tally_wins(other, lrs, failed, penalty)
+            out[label] = doc
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return out
+
+
+def pair_lr(job: tuple[Any, ...]) -> float | str:
+    """2 (ln L_right − ln L_wrong) of one simulated set ``ss`` (a list of runs) fitted by
+    the right model ``mt`` (started at ``pt``) and the wrong ``mo`` (at ``po``); the
+    error's text when a fit fails. :func:`verify`'s unit of work (a worker process's)."""
+    from ..ml.fit import ml
+    from ..ml.joint import joint_ml
+
+    ss, mt, pt, mo, po = job
+    try:
+        if len(ss) == 1:
+            lt = ml(ss[0], mt, start=pt, **VERIFY_FIT).loglik
+            lo = ml(ss[0], mo, start=po, **VERIFY_FIT).loglik
+        else:
+            lt = joint_ml(ss, mt, start=pt, **VERIFY_FIT).loglik
+            lo = joint_ml(ss, mo, start=po, **VERIFY_FIT).loglik
+    except GyrostandError as exc:
+        return str(exc)
+    assert lt is not None and lo is not None
+    return 2.0 * (lt - lo)
 
 
 #: design's defaults the command leaves out (cli/design.py: --legs, --min-soak)
