@@ -1,7 +1,7 @@
 """The workbench's advice followed as a user follows it (issue 23's acceptance): on runs with
 hidden effects, ``diagnose``; while it says NOT ADEQUATE and ranks a significant candidate,
-``fit --add`` the first one; stop at ADEQUATE, or when nothing in the vocabulary is
-significant. A run counts as right when the sequence ends with exactly the true terms and
+``fit --add`` the first one; when it is ADEQUATE but names a redundant term, ``fit
+--remove`` it; stop at ADEQUATE, or when nothing in the vocabulary is significant. A run counts as right when the sequence ends with exactly the true terms and
 ADEQUATE — or, for a shape outside the vocabulary, NOT ADEQUATE naming an effect outside
 the vocabulary and no wrong term added. Also: the headline's unexplained share of the
 open-loop error before the right term (target ≥ 50 %) and the fall of that unexplained
@@ -39,13 +39,13 @@ KINDS.update({
     "temp_rate+trend": (["temp_rate", "trend"], {"temp_rate.k": 5.0, "trend.c": 1e-5}),
     "warmup+temp2": (["warmup", "temp2"], {"warmup.A": 0.5, "warmup.tau": 900.0,
                                            "temp2.gamma2": 5e-6}),
-    "random_walk": (["random_walk"], {"random_walk.q": 5e-4}),
+    "random_walk": (["random_walk"], {"random_walk.q": 2e-3}),
     "temp_lag+random_walk": (["temp_lag", "random_walk"], {"temp_lag.tau": 600.0,
-                                                          "random_walk.q": 1.5e-4}),
+                                                          "random_walk.q": 1e-3}),
     "clean": ([], {}),
     "cubic in T (outside)": ([], {}),
 })
-MAX_STEPS = 4
+MAX_STEPS = 6
 
 
 def data(kind: str, seed: int, tmp: Path) -> Samples:
@@ -75,6 +75,11 @@ def sequence(s: Samples) -> tuple[list[str], bool, list[str], list[tuple[float, 
         rep = diagnose(s, model)
         h = rep.model_error.headline()
         errors.append((h["rms"], h["unexplained"] or 0.0))
+        if rep.adequate and rep.redundant:  # next: fit --remove the redundant term
+            gone = rep.redundant[0]["term"]
+            added.remove(gone)
+            model = model.remove(gone)
+            continue
         if rep.adequate or not rep.significant:
             return added, rep.adequate, list(rep.reasons), errors
         term = rep.significant[0].term

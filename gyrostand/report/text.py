@@ -117,6 +117,13 @@ def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN,
         lines.append(f"next: {term_new_command(fit_command)}")
         lines.append("      (writes a plugin term of the shape the reference shows; review "
                      "it, pip install it, then fit --add it: README, plugins)")
+    elif rep.adequate and rep.redundant:
+        lines.append("")
+        for x in rep.redundant:
+            lines.append(f"redundant: {x['term']} no longer earns its place (LR "
+                         f"{x['lr_stat']:.2f} on {x['df']} df{_test(x['test'])}, p = "
+                         f"{x['p_value']:.2g}): the model is adequate without it")
+        lines.append(f"next: {fit_command} --remove {rep.redundant[0]['term']}")
     elif rep.adequate and adopt_command:
         lines.append("")
         lines.append(f"next: {adopt_command}")

@@ -91,6 +91,9 @@ class Report:
     notes: tuple[str, ...] = ()
     unit: str = DRIFT_UNIT
     reference: Reference | None = field(default=None, compare=False)
+    #: terms of an adequate model that no longer earn their place
+    #: (:func:`~.verdict.redundant_terms`): ``fit --remove`` them
+    redundant: tuple[dict[str, Any], ...] = ()
 
     @property
     def significant(self) -> list[Candidate]:
@@ -117,6 +120,7 @@ class Report:
             **({"model_error": self.model_error.to_dict()} if self.model_error else {}),
             **({"reference": self.reference.to_dict()} if self.reference else {}),
             "notes": list(self.notes),
+            "redundant": [dict(x) for x in self.redundant],
         }
 
 

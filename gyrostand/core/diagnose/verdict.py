@@ -18,12 +18,14 @@ T, of dT/dt and of time) and that a plugin term of that shape is the next step.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
+from typing import Any
 
-from ...errors import DataError
+from ...errors import DataError, GyrostandError
 from ..data import Samples
 from ..ml.fit import ml
 from ..model import Model, context
@@ -36,6 +38,7 @@ from .candidates import (
     order_competitors,
     rank_candidates,
     refit_from_candidates,
+    term_test,
 )
 from .diagnostics import Diagnosis, diagnose_fit, segments
 from .prederror import ModelError, model_error
@@ -45,6 +48,8 @@ from .reference import (
     reference_fit,
 )
 from .results import Candidate, Report
+
+log = logging.getLogger(__name__)
 
 
 def lack_of_fit_text(ref: Reference) -> str:
@@ -129,6 +134,39 @@ def verdict_reasons(diag: Diagnosis, err: ModelError, ref: Reference | None,
     return reasons
 
 
+#: the terms of the paper's model, never proposed for removal
+CORE_TERMS = ("markov", "temp", "white", "bias")
+
+
+def redundant_terms(samples: Samples, model: Model, fit: FitResult, alpha: float = 0.05
+                    ) -> list[dict[str, Any]]:
+    """The terms of an adequate model that no longer earn their place: each term beyond
+    :data:`CORE_TERMS` that no other term requires is removed and the smaller model
+    refitted; a term whose test against the smaller model (the one it would get as a
+    candidate there, :func:`~.candidates.term_test`) has p ≥ ``alpha`` is listed (term,
+    lr_stat, df, p_value, test). Forward selection alone keeps what an earlier step added
+    before the real effects were in: a random walk proposed first for a warm-up with a T²
+    effect stayed after both were added (benchmarks/advice_sequence.py)."""
+    out = []
+    needed = {r for t in model.terms for r in t.requires}
+    for term in model.names:
+        if term in CORE_TERMS or term in needed:
+            continue
+        smaller = model.remove(term)
+        try:
+            small = ml(samples, smaller, start={k: v for k, v in fit.values.items()
+                                                if k in smaller.param_names})
+            df, p, test = term_test(samples, smaller, small, fit, term)
+        except GyrostandError as exc:
+            log.info("removal of %s not tested: %s", term, exc)
+            continue
+        assert fit.loglik is not None and small.loglik is not None
+        if p >= alpha:
+            out.append({"term": term, "lr_stat": max(2 * (fit.loglik - small.loglik), 0.0),
+                        "df": df, "p_value": p, "test": test})
+    return out
+
+
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
              unit: str = DRIFT_UNIT) -> Report:
@@ -184,5 +222,7 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit)
     return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
+                  redundant=tuple(redundant_terms(samples, model, fit, alpha))
+                  if not reasons else (),
                   look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
                   model_error=err, notes=tuple(notes), unit=unit, reference=ref)
