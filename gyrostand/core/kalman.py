@@ -22,24 +22,10 @@ import numpy as np
 from numba import njit
 
 from .jit import listen
+from .rts import joseph_finish, rts_forward, writable
 from .rts import kf_smooth as kf_smooth
-from .rts import rts_forward, writable
 
 listen()  # a compilation is shown as progress (jit.watch)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
-    """P = B (I − K H)' + K r K' with B = (I − K H) P and BH = B H', kept symmetric."""
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(n):
-            P[i, j] = B[i, j] - BH[i] * K[j] + K[i] * r * K[j]
-    for i in range(n):
-        for j in range(i + 1, n):
-            s = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = s
-            P[j, i] = s
 
 
 @njit(cache=True, nogil=True, inline="always")

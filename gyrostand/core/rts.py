@@ -18,6 +18,20 @@ from .jit import listen
 listen()  # a compilation is shown as progress (jit.watch)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
+    """P = B (I − K H)' + K r K' with B = (I − K H) P and BH = B H', kept symmetric."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = B[i, j] - BH[i] * K[j] + K[i] * r * K[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+
+
 def writable(a):
     """``a`` as a writable C-contiguous float array: numba compiles a kernel once per
     argument type, and a read-only array (a frozen :class:`~gyrostand.core.data.Samples`'
@@ -105,14 +119,7 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
                     for j in range(n):
                         s += A[i, j]
                     AH[i] = s
-                for i in range(n):
-                    for j in range(n):
-                        P[i, j] = A[i, j] - AH[i] * K[j] + K[i] * rk * K[j]
-                for i in range(n):
-                    for j in range(i + 1, n):
-                        m = 0.5 * (P[i, j] + P[j, i])
-                        P[i, j] = m
-                        P[j, i] = m
+                joseph_finish(P, A, AH, K, rk)
         for i in range(n):
             xf[k, i] = x[i]
             for j in range(n):
