@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import datetime as _dt
 import io
 import math
 from dataclasses import dataclass, field
@@ -141,12 +142,12 @@ class Samples:
         steps = np.diff(t)
         bad = np.flatnonzero(steps == 0)
         if bad.size:
-            raise DataError(f"{where(bad[0] + 1)}: duplicated time t = {t[bad[0] + 1]:g} s")
+            raise DataError(f"{where(bad[0] + 1)}: duplicated time t = {when(t[bad[0] + 1])}")
         bad = np.flatnonzero(steps < 0)
         if bad.size:
             i = bad[0] + 1
             raise DataError(
-                f"{where(i)}: time goes backwards (t = {t[i]:g} s after {t[i - 1]:g} s); "
+                f"{where(i)}: time goes backwards (t = {when(t[i])} after {when(t[i - 1])}); "
                 "samples must be in increasing time order"
             )
         bad = np.flatnonzero(np.isinf(drift) | np.isinf(temp))
@@ -169,8 +170,8 @@ class Samples:
             if n > max(MAX_GRID_FACTOR * t.size, MIN_GRID_LIMIT):
                 j = int(np.argmax(steps))
                 raise DataError(
-                    f"{where(j + 1)}: time jumps by {steps[j]:.6g} s (from t = {t[j]:.10g} "
-                    f"to {t[j + 1]:.10g} s), {steps[j] / dt:.3g} steps of {dt:g} s: the "
+                    f"{where(j + 1)}: time jumps by {steps[j]:.6g} s (from t = {when(t[j])} "
+                    f"to {when(t[j + 1])}), {steps[j] / dt:.3g} steps of {dt:g} s: the "
                     f"grid would need {n:,} samples for {t.size:,} rows — a timestamp typo?"
                 )
             off = np.abs(rel - k * dt)
@@ -178,8 +179,8 @@ class Samples:
             if far.size:
                 i = far[0]
                 raise DataError(
-                    f"{where(i)}: t = {t[i]:.10g} s is not on the {dt:g}-s grid started at "
-                    f"{t[0]:.10g} s (off by {off[i]:.3g} s, more than {SNAP_FRACTION:g} of a "
+                    f"{where(i)}: t = {when(t[i])} is not on the {dt:g}-s grid started at "
+                    f"{when(t[0])} (off by {off[i]:.3g} s, more than {SNAP_FRACTION:g} of a "
                     "step); give the step with --dt or resample the data to a uniform step"
                 )
             tol = 1e-6 * dt + 8 * np.spacing(np.abs(t))
@@ -333,6 +334,21 @@ def _columns(body: list[list[str]], cols: list[int]) -> np.ndarray | None:
     return arr
 
 
+#: times above this (s) are Unix epoch times (after 1973): errors print them as UTC too
+EPOCH_FROM = 1e8
+
+
+def when(t: float) -> str:
+    """A row's time as an error names it: ``12.5 s``, or for an epoch time every digit
+    and the UTC date (``1733300000.25 s (2024-12-04 08:13:20.25 UTC)``, not
+    ``1.7e+09 s``)."""
+    if not (math.isfinite(t) and t >= EPOCH_FROM):
+        return f"{t:g} s"
+    utc = _dt.datetime.fromtimestamp(t, _dt.UTC)
+    return f"{t:.6f}".rstrip("0").rstrip(".") + \
+        f" s ({utc.strftime('%Y-%m-%d %H:%M:%S')}{f'{t % 1:.6f}'[1:].rstrip('0').rstrip('.')} UTC)"
+
+
 def common_step(t: np.ndarray) -> float:
     """The record's own step (s): the median of the steps near the most common one.
 
@@ -340,14 +356,29 @@ def common_step(t: np.ndarray) -> float:
     that alternates 9, 10 and 11 s leave it at the true step; the smallest step would not.
     Steps are compared at 1e-6 of the median step.
     """
-    steps = np.diff(np.asarray(t, dtype=float))
+    t = np.asarray(t, dtype=float)
+    steps = np.diff(t)
     if steps.size == 0:
         return 1.0
     q = max(float(np.median(steps)) * 1e-6, 1e-9)
     vals, cnt = np.unique(np.rint(steps / q), return_counts=True)
     mode = float(vals[np.argmax(cnt)] * q)
     near = steps[(steps > 0.75 * mode) & (steps < 1.5 * mode)]
-    return float(np.rint(np.median(near) / q) * q)
+    dt = float(np.median(near))
+    # timestamps with jitter (a 1-Hz logger at ±0.05 s: steps of 0.9 and 1.1 s, whose
+    # median is either): the step whose grid the rows lie on, the least-squares slope of
+    # t against the grid index, started from the mean of the steps near the mode
+    rel = t - t[0]
+    k = np.rint(rel / float(np.mean(near)))
+    if t.size >= 10 and k[-1] > 0 and np.all(np.diff(k) >= 0):  # (a slope needs rows)
+        fit = float(k @ rel / (k @ k))
+        if abs(fit - dt) > 1e-6 * dt and np.max(np.abs(rel - k * fit)) < \
+                np.max(np.abs(rel - np.rint(rel / dt) * dt)):
+            dt = fit
+    nice = float(f"{dt:.3g}")  # 1.0 s, not 1.000003 s, from jittered rows
+    if abs(nice - dt) <= 1e-3 * dt:
+        return nice
+    return float(np.rint(dt / q) * q)
 
 
 def _to_grid(idx: np.ndarray, n: int, drift: np.ndarray, temp: np.ndarray,

@@ -201,3 +201,22 @@ def test_spikes_are_caught_next_to_gaps_and_as_two_sample_jolts():
     y[250], y[251] = -60.0, 55.0  # a jolt: a swing and its rebound
     y[300:] += 70.0  # a step is no spike
     assert list(find_spikes(y)) == [100, 250, 251]
+
+
+def test_a_1_hz_logger_with_jitter_is_on_its_1_s_grid(tmp_path):
+    """Issue 28: rows at 1 Hz ± 0.05 s (steps of 0.9 and 1.1 s) are on the 1-s grid, not
+    'not on the 1.1-s grid'; each row lands in its own bin."""
+    rows = "".join(f"{k + (0.05 if k % 2 else -0.05):.3f},{0.1 + 0.001 * k},25\n"
+                   for k in range(200))
+    s = Samples.read_csv(write(tmp_path, "t,drift,temp\n" + rows))
+    assert s.dt == 1.0 and len(s) == 200 and np.isfinite(s.drift).all()
+    np.testing.assert_allclose(s.drift, 0.1 + 0.001 * np.arange(200))
+
+
+def test_errors_name_epoch_times_with_every_digit_and_the_date(tmp_path):
+    """Issue 28: 't = 1.7e+09 s' named no row a person can find."""
+    rows = "".join(f"{1733300000 + k},0.1,25\n" for k in range(20))
+    p = write(tmp_path, "t,drift,temp\n" + rows + "1733300010.5,0.1,25\n")
+    with pytest.raises(DataError, match=r"t = 1733300010.5 s \(2024-12-04 08:13:30.5 UTC\) "
+                                        r"after 1733300019 s"):
+        Samples.read_csv(p)
