@@ -100,6 +100,9 @@ def read_input(path: str | Path, *, gyro: str | None = None, dt: float | None = 
     path = Path(path)
     kind = input_kind(path)
     if kind == "missing":
+        if path.exists():  # a FIFO, a socket, a device: reading it could block for ever
+            raise DataError(f"{path}: not a regular file or a run folder (a pipe or a "
+                            "device): give a run folder, a CSV, a Parquet export or a log")
         raise DataError(f"{path}: no such run folder or file")
     if config is not None and kind != "log":
         raise ConfigError(f"--config {config}: only a raw CAN log needs a session file "

@@ -128,3 +128,15 @@ def test_a_log_of_another_stand_names_the_mapping(stand, tmp_path, capsys):
     assert main(["identify", str(other), "--config", str(cfg), "-q"]) == 2
     err = capsys.readouterr().err
     assert "decoded none of 2 CAN frames through the DBC mapping" in err, err
+
+
+def test_a_fifo_is_refused_without_blocking(tmp_path, capsys):
+    """Issue 28: identify on a FIFO blocked for ever."""
+    import os
+
+    from gyrostand.cli import main
+
+    fifo = tmp_path / "run.csv"
+    os.mkfifo(fifo)
+    assert main(["identify", str(fifo)]) == 2
+    assert "not a regular file or a run folder" in capsys.readouterr().err
