@@ -9,16 +9,18 @@ lost its line end (a hand-edited ledger) is kept, and gets its line end back.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from ..errors import DataError, OutputError
 from ..runfolder import append_line, cut_torn_tail, read_lines
 
-__all__ = ["read_ledger", "append_ledger"]
+__all__ = ["read_ledger", "append_ledger", "ledger_lock"]
 
 log = logging.getLogger(__name__)
 
@@ -66,3 +68,27 @@ def append_ledger(path: Path, entry: dict[str, Any]) -> dict[str, Any]:
     except OSError as exc:
         raise OutputError(f"{path}: cannot record the step: {exc.strerror or exc}") from exc
     return entry
+
+
+@contextlib.contextmanager
+def ledger_lock(path: Path) -> Iterator[None]:
+    """Hold the ledger for a read-fit-append (an exclusive ``flock`` on the ledger file,
+    created empty if missing): two ``fit`` commands on one run at once each start from
+    the model the other recorded, one after the other (before, the second started from
+    the model both had read and its step dropped the first's term). Where ``fcntl`` is
+    missing (Windows) nothing is held."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    try:
+        fh = path.open("a", encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot open the ledger: {exc.strerror or exc}") from exc
+    with fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)

@@ -25,8 +25,8 @@ from ..core.model import Model
 from ..core.results import FitResult
 from ..core.summary import DRIFT_UNIT
 from ..errors import GyrostandError, OutputError
-from .ledger import append_ledger
-from .subject import Subject
+from .ledger import append_ledger, ledger_lock
+from .subject import Subject, current_model
 
 __all__ = ["fit_summary", "run_diagnose", "FitStep", "run_fit"]
 
@@ -172,7 +172,20 @@ def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
 
 def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (),
             *, record: bool = True) -> FitStep:
-    """Refit with terms added/removed; before and after side by side; ledger step."""
+    """Refit with terms added/removed; before and after side by side; ledger step (the
+    ledger held meanwhile, :func:`~.ledger.ledger_lock`: a fit recorded by another command
+    since the subject was opened is the starting model)."""
+    if not record:
+        return _fit(subject, add, remove, record=False)
+    with ledger_lock(subject.ledger_path):
+        if not subject.model_given:
+            subject = dataclasses.replace(subject, model=current_model(
+                subject.ledger_path, subject.gyro, subject.model.names))
+        return _fit(subject, add, remove, record=True)
+
+
+def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
+         record: bool) -> FitStep:
     new = changed_model(subject.model, add, remove)
     before = ml(subject.samples, subject.model)
     after = ml(subject.samples, new, start=before.values)
