@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .jit import listen
-from .rts import joseph_finish, rts_forward, writable
+from .rts import joseph_finish, joseph_sum, rts_forward, writable
 from .rts import kf_smooth as kf_smooth
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -192,16 +192,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     G[a, c] += e_row[a] * e_row[c] / f
             if not steady:
                 # Joseph form: P = (I - K H) P (I - K H)' + K R K'
-                # (I - K H) P = P - K (H P);  then right-multiply by (I - K H)'
-                for i in range(n):
-                    for j in range(n):
-                        A[i, j] = P[i, j] - K[i] * PH[j]
-                for i in range(n):
-                    s = 0.0
-                    for j in range(n):
-                        s += A[i, j]
-                    AH[i] = s
-                joseph_finish(P, A, AH, K, rk)
+                joseph_sum(P, K, PH, rk, A, AH)
         # predict: x = F x ; P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
         for i in range(n):
             for c in range(m):

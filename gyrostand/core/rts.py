@@ -32,6 +32,23 @@ def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
             P[j, i] = s
 
 
+@njit(cache=True, nogil=True, inline="always")
+def joseph_sum(P, K, PH, r, A, AH):  # pragma: no cover - compiled
+    """The Joseph update for states observed through their sum (H = [1 … 1]):
+    A = (I − K H) P = P − K PH', AH = A H' (its row sums), then P = A (I − K H)' + K r K'
+    (:func:`joseph_finish`). ``A`` (n, n), ``AH`` (n,) work arrays."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            A[i, j] = P[i, j] - K[i] * PH[j]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += A[i, j]
+        AH[i] = s
+    joseph_finish(P, A, AH, K, r)
+
+
 def writable(a):
     """``a`` as a writable C-contiguous float array: numba compiles a kernel once per
     argument type, and a read-only array (a frozen :class:`~gyrostand.core.data.Samples`'
@@ -110,16 +127,7 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
                 for i in range(n):
                     K[i] = PH[i] / f
                     x[i] += K[i] * e
-                # Joseph form: A = (I - K H) P ;  P = A (I - K H)' + K R K', symmetric
-                for i in range(n):
-                    for j in range(n):
-                        A[i, j] = P[i, j] - K[i] * PH[j]
-                for i in range(n):
-                    s = 0.0
-                    for j in range(n):
-                        s += A[i, j]
-                    AH[i] = s
-                joseph_finish(P, A, AH, K, rk)
+                joseph_sum(P, K, PH, rk, A, AH)
         for i in range(n):
             xf[k, i] = x[i]
             for j in range(n):
