@@ -114,12 +114,14 @@ def run(args: argparse.Namespace) -> int:
 
         return run_separate(args, given)
     reference_record = None
+    drift_unit = "y"  # the drift's unit: the run's (its DBC's), else the model's y
     if args.run is not None:
         from ..core.ml.fit import ml
         from ..workbench import open_subject
 
         subject = open_subject(args.run, gyro=args.gyro, model=args.model)
         model = subject.model
+        drift_unit = subject.unit
         with progress.stage("design", "fit of the run"):
             fit = ml(subject.samples, model)
         params = {**fit.values, **given}
@@ -162,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         verify = _verify(model, params, limits, case,
                          reference_record or (limits.grid, ref_case), args.verify, args.seed,
                          res.doubt)
-    doc = _document(res, limits, model, ref_label, verify)
+    doc = _document(res, limits, model, ref_label, verify, drift_unit)
     (out / "design.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if args.json:
         json.dump(doc, sys.stdout, indent=2, allow_nan=False)
@@ -176,7 +178,10 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
+def _document(res, limits, model, ref_label: str, verify, drift_unit: str = "y"
+              ) -> dict[str, Any]:
+    from ..core.summary import unit_text
+
     name, rel = res.worst()
     rname, rrel = res.worst("reference")
     return {
@@ -189,6 +194,10 @@ def _document(res, limits, model, ref_label: str, verify) -> dict[str, Any]:
         "worst": {"designed": [name, _finite(rel)], "reference": [rname, _finite(rrel)]},
         "evaluations": res.evaluations,
         "verify": verify,
+        # the units of the stds above (each parameter's, the drift's in place of y), and
+        # of the program's times and temperatures
+        "units": {"parameters": {n: unit_text(model.unit(n), drift_unit) for n in res.params},
+                  "drift": drift_unit, "time": "s", "temperature": "degC"},
     }
 
 

@@ -72,3 +72,20 @@ def test_the_interval_is_seeded():
 
     assert bootstrap_ratio(mean, a, b) == bootstrap_ratio(mean, a, b)
     assert bootstrap_ratio(mean, a, b, seed=1) != bootstrap_ratio(mean, a, b)
+
+
+def test_design_json_names_the_units_of_its_numbers(tmp_path):
+    """Units in every document (issue 27): design.json says the unit of each std."""
+    import json
+
+    from gyrostand.cli import main
+
+    out = tmp_path / "d"
+    assert main(["design", "--model", "markov,temp", "--param", "markov.beta=0.01",
+                 "--param", "markov.sigma=0.05", "--param", "temp.gamma=-0.0005",
+                 "--param", "white.sigma=0.02", "--hours", "2", "--evaluations", "2",
+                 "--out", str(out), "-q"]) == 0
+    units = json.loads((out / "design.json").read_text())["units"]
+    assert units["parameters"] == {"markov.beta": "1/s", "markov.sigma": "y",
+                                   "temp.gamma": "y/(s·°C)", "white.sigma": "y"}
+    assert (units["time"], units["temperature"]) == ("s", "degC")
