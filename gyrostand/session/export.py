@@ -10,8 +10,9 @@ Both carry the same data as the CSVs, values unchanged (float64; counts as integ
 * **MDF4** (4.10): ``<out>/<run folder name>.mf4``, per gyro one channel group of samples
   (``<gyro>.drift``, ``<gyro>.temp``, ``<gyro>.n_drift``, ``<gyro>.n_temp``) and one of
   online estimates (``<gyro>.<id>.<param>``, ``...std``, ``<gyro>.<id>.status`` with a
-  value-to-text conversion); master channel ``t`` in s since the run's first bin, the
-  absolute time of that bin in the file header's start time; each channel with its unit.
+  value-to-text conversion); master channel ``time`` (asammdf's name) in s since the
+  run's first bin, the absolute time of that bin in the file header's start time; each
+  channel with its unit.
 
 Units: the drift's and temperature's from the run's session file (the DBC signals) when it
 can still be read, else ``y`` and ``degC``; a parameter's unit from the model (``y``
