@@ -15,7 +15,7 @@ import numpy as np
 from ..core.chisq import chi2_sf
 from ..core.data import Samples
 from ..core.design.separation import design_command
-from ..core.diagnose.candidates import term_test
+from ..core.diagnose.candidates import candidate_terms, term_test
 from ..core.diagnose.prederror import ModelError
 from ..core.diagnose.reference import reference_fit
 from ..core.diagnose.results import TEST_CHI2, Report
@@ -56,8 +56,11 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
 
     with progress.stage(command, f"ML fit of {','.join(subject.model.names)}"):
         fit = ml(subject.samples, subject.model)
-    with progress.stage(command, "candidates, residual tests, model-error floor"):
-        rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit)
+    n = len(candidate_terms(subject.model))
+    with progress.stage(command, "candidates, reference, residuals, floor",
+                        total=n, unit="candidates") as st:
+        rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit,
+                       on_candidate=lambda term: st.update(1))
     if rep.look_alikes:
         rep = with_design_commands(rep, subject)
     if record:

@@ -100,8 +100,8 @@ def test_nothing_from_library_use(replay_args, capsys):
 # estimates over time, figures), from the workbench, not from the numerical core ---------
 
 WORKBENCH_LINE = re.compile(
-    r"^(diagnose|report): (ML fit of the current model|candidates, residual tests, "
-    r"model-error floor|Allan tables|estimates over time|figures: 7 figures):? in [\d.]+ s$",
+    r"^(diagnose|report): (ML fit of [a-z0-9_,]+|candidates, reference, residuals, floor"
+    r"|Allan tables|estimates over time|figures: 7 figures):? in [\d.]+ s$",
     re.M)
 
 
@@ -116,7 +116,9 @@ def chamber_csv(tmp_path_factory):
 
 def test_diagnose_shows_its_stages_as_bars_on_a_terminal(chamber_csv):
     out = _on_pty(["diagnose", str(chamber_csv), "--unit", "deg/h"]).replace("\r\n", "\n")
-    assert "diagnose: candidates, residual tests, model-error floor" in out
+    assert "diagnose: candidates, reference, residuals, floor" in out
+    # the candidates counted: all 8 of the vocabulary's for markov,temp,bias
+    assert re.search(r"\| ?8/8", out), out[-2000:]
     assert "\r" in out  # tqdm redraws in place
     assert not WORKBENCH_LINE.search(out), out[-2000:]
     assert "verdict" in out and "Allan variance" in out  # the result itself, on stdout

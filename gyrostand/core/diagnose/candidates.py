@@ -52,7 +52,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -73,6 +73,7 @@ from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candida
 from .shapes import as_runs, shape_curvatures, shape_params
 
 log = logging.getLogger(__name__)
+_DONE_LOCK = threading.Lock()
 
 #: fewest observed samples a diagnosis judges (Ljung–Box lags, candidate refits)
 MIN_DIAGNOSE_SAMPLES = 30
@@ -176,7 +177,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
 
 
 def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
-            also: Mapping[str, float] | None = None
+            also: Mapping[str, float] | None = None,
+            on_done: Callable[[str], None] | None = None
             ) -> list[tuple[FitResult | None, GyrostandError | None, float,
                             tuple[float, ...]]]:
     """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
@@ -204,6 +206,9 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
         lkc: tuple[float, ...] = ()
         if shaped:
             lkc = shape_curvatures(samples, model, base, term)
+        if on_done is not None:
+            with _DONE_LOCK:
+                on_done(term)
         return r, None, seconds, lkc
 
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
@@ -230,15 +235,17 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
 def rank_candidates(samples: Samples, model: Model, base: FitResult,
                     terms: list[str] | None = None,
                     also: Mapping[str, float] | None = None,
-                    alpha: float = 0.05) -> list[Candidate]:
+                    alpha: float = 0.05,
+                    on_done: Callable[[str], None] | None = None) -> list[Candidate]:
     """Refit ``model + c`` for each candidate ``c`` (started also from ``also``, see
     :func:`refit`); in :func:`ordered`'s order at ``alpha`` (Bonferroni over the
-    candidates, as the verdict)."""
+    candidates, as the verdict). ``on_done(term)``: called as each refit ends (a progress
+    count; from the refits' threads, one call at a time)."""
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
-    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo, also),
-                                            strict=True):
+    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo, also,
+                                                          on_done), strict=True):
         bigger = model.add(term)
         if r is None:
             log.warning("candidate %s could not be fitted: %s", term, exc)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from typing import Any
@@ -169,12 +170,14 @@ def redundant_terms(samples: Samples, model: Model, fit: FitResult, alpha: float
 
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
-             unit: str = DRIFT_UNIT) -> Report:
+             unit: str = DRIFT_UNIT,
+             on_candidate: Callable[[str], None] | None = None) -> Report:
     """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
 
     A significant candidate whose effect is not identified sends the current model back to
     a refit from that candidate's optimum; if the current fit rises, every candidate is
-    recomputed (at most twice) and a note says so.
+    recomputed (at most twice) and a note says so. ``on_candidate(term)``: called as each
+    candidate's refit ends (a progress count).
     """
     if samples.n_observed < MIN_DIAGNOSE_SAMPLES:
         raise DataError(
@@ -195,7 +198,8 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                 ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
             early = side.submit(checks, first, samples, unit, ref)
         for _ in range(3):
-            cands = rank_candidates(samples, model, fit, terms, also=_also(ref), alpha=alpha)
+            cands = rank_candidates(samples, model, fit, terms, also=_also(ref), alpha=alpha,
+                                    on_done=on_candidate)
             m = max(len(cands), 1)
             alpha_each = alpha / m
             better = refit_from_candidates(samples, model, fit, cands, alpha_each)
