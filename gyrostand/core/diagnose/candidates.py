@@ -416,8 +416,8 @@ def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Ca
     log predictive density given the data before it). The held-out score alone put a
     random walk first on a warm-up with a T² effect (each deterministic term alone
     leaves the other's structure, which a walk absorbs); a random walk proposed after a
-    trend it explains is tested again, and the trend then shows as redundant
-    (:func:`~.verdict.redundant_terms`)."""
+    trend it explains is tested again at the next diagnosis, where the backward check
+    (:func:`~.verdict.redundant_terms`) can name the trend redundant."""
     if not _nested_says_random(samples, model, d, st, alpha_each):
         return False
     e_d, e_s = _held_out(samples, model, d, cache), _held_out(samples, model, st, cache)
