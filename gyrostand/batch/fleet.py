@@ -109,8 +109,13 @@ def _scores(rows: Sequence[dict[str, Any]]
 
 def outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """One entry per (row, parameter) flagged: run, gyro, type, parameter, value, z."""
+    return _flags(_scores(rows))
+
+
+def _flags(scores: list[tuple[dict[str, Any], str, float, str, float]]
+           ) -> list[dict[str, Any]]:
     return [{"run": r["run"], "gyro": r.get("gyro"), "type": typ, "parameter": p,
-             "value": v, "z": z} for r, p, v, typ, z in _scores(rows) if abs(z) > Z_LIMIT]
+             "value": v, "z": z} for r, p, v, typ, z in scores if abs(z) > Z_LIMIT]
 
 
 def with_outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -118,11 +123,12 @@ def with_outliers(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     fleet.parquet): ``outliers`` (``parameter z=…`` of each flagged parameter, ``; ``
     between) and ``max_abs_z`` (the largest |robust z| of the row's parameters; empty where
     no group is large enough to judge). The flags are :func:`outliers`'s."""
+    scores = _scores(rows)
     flags: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
-    for f in outliers(rows):
+    for f in _flags(scores):
         flags.setdefault((f["run"], f["gyro"]), []).append(f)
     zmax: dict[tuple[Any, Any], float] = {}
-    for r, _, _, _, z in _scores(rows):
+    for r, _, _, _, z in scores:
         key = (r["run"], r.get("gyro"))
         zmax[key] = max(zmax.get(key, 0.0), abs(z))
     out = []

@@ -474,11 +474,14 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     # a lack of fit LR 96 on 17 df showed no group: the temperature's Wald 4.7 on 7 df;
     # at the reference's 435 on 9), its Wald then referred as the LR is (/ FREE_LR_SCALE:
     # the basis trades with the random part's low frequencies)
-    at = {**p, **({n: float(fit.values[n]) for n in noise_names} if traded else {})}
-    W, wy, names = _whitened(ref_model0, at, samples, tangents)
-    theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
-    at.update({n: float(v) for n, v in zip(names, theta, strict=True)
-               if n.startswith(NAME + ".")})
+    # (not traded: the first GLS's design and estimate, already in W and p)
+    at = p
+    if traded:
+        at = {**p, **{n: float(fit.values[n]) for n in noise_names}}
+        W, wy, names = _whitened(ref_model0, at, samples, tangents)
+        theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
+        at.update({n: float(v) for n, v in zip(names, theta, strict=True)
+                   if n.startswith(NAME + ".")})
     partial = _partials(basis0, at, np.linalg.pinv(W.T @ W, rcond=1e-12, hermitian=True),
                         names, samples, FREE_LR_SCALE if traded else 1.0)
     return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
