@@ -370,15 +370,23 @@ def common_step(t: np.ndarray) -> float:
     # t against the grid index, started from the mean of the steps near the mode
     rel = t - t[0]
     k = np.rint(rel / float(np.mean(near)))
-    if t.size >= 10 and k[-1] > 0 and np.all(np.diff(k) >= 0):  # (a slope needs rows)
+    # — only where the median's grid leaves rows off it and the fitted one does not
+    if t.size >= 10 and k[-1] > 0 and np.all(np.diff(k) >= 0) and \
+            _off_grid(rel, dt) > SNAP_FRACTION * dt:  # (a slope needs rows)
         fit = float(k @ rel / (k @ k))
-        if abs(fit - dt) > 1e-6 * dt and np.max(np.abs(rel - k * fit)) < \
-                np.max(np.abs(rel - np.rint(rel / dt) * dt)):
+        if _off_grid(rel, fit) <= SNAP_FRACTION * fit:
             dt = fit
-    nice = float(f"{dt:.3g}")  # 1.0 s, not 1.000003 s, from jittered rows
-    if abs(nice - dt) <= 1e-3 * dt:
+    # 1.0 s, not 1.000003 s, from jittered rows; but only where the rows lie on the
+    # round step's grid as well (a logger clock 0.04 % fast keeps its own step)
+    nice = float(f"{dt:.3g}")
+    if abs(nice - dt) <= 1e-3 * dt and _off_grid(rel, nice) <= _off_grid(rel, dt) + 1e-3 * dt:
         return nice
     return float(np.rint(dt / q) * q)
+
+
+def _off_grid(rel: np.ndarray, dt: float) -> float:
+    """The largest distance (s) of times ``rel`` from the grid of step ``dt`` through 0."""
+    return float(np.max(np.abs(rel - np.rint(rel / dt) * dt)))
 
 
 def _to_grid(idx: np.ndarray, n: int, drift: np.ndarray, temp: np.ndarray,

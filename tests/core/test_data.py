@@ -220,3 +220,11 @@ def test_errors_name_epoch_times_with_every_digit_and_the_date(tmp_path):
     with pytest.raises(DataError, match=r"t = 1733300010.5 s \(2024-12-04 08:13:30.5 UTC\) "
                                         r"after 1733300019 s"):
         Samples.read_csv(p)
+
+
+def test_a_logger_clock_slightly_off_keeps_its_own_step(tmp_path):
+    """The jitter rule's round step (1 s) is taken only where the rows lie on its grid: a
+    clock 0.04 % fast over 2000 rows keeps its 1.0004-s step (a 1-s grid is 0.8 s off)."""
+    rows = "".join(f"{k * 1.0004:.4f},0.1,25\n" for k in range(2000))
+    s = Samples.read_csv(write(tmp_path, "t,drift,temp\n" + rows))
+    assert s.dt == pytest.approx(1.0004, abs=1e-9) and len(s) == 2000
