@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .jit import listen
-from .rts import joseph_finish, joseph_sum, rts_forward, writable
+from .rts import joseph_covariance, rts_forward, writable
 from .rts import kf_smooth as kf_smooth
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -63,25 +63,6 @@ def joseph_update(x, P, H, e, f, r, PH, K, B, BH):  # pragma: no cover - compile
         K[i] = PH[i] / f
         x[i] += K[i] * e
     joseph_covariance(P, H, K, PH, r, B, BH)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def joseph_covariance(P, H, K, PH, r, B, BH):  # pragma: no cover - compiled
-    """P = (I − K H) P (I − K H)' + K r K' in place, given the gain ``K`` and PH = P H'.
-
-    (I − K H) P = P − K (H P), H P = PH' since P is symmetric; then right-multiplied by
-    (I − K H)' (:func:`joseph_finish`). ``B`` (n, n), ``BH`` (n,) work arrays.
-    """
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(n):
-            B[i, j] = P[i, j] - K[i] * PH[j]
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            s += B[i, j] * H[j]
-        BH[i] = s
-    joseph_finish(P, B, BH, K, r)
 
 
 def kf_run(phi, q, p0, r, rw, Y, store):
@@ -130,6 +111,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     K = np.empty(n)
     A = np.empty((n, n))
     AH = np.empty(n)
+    ones = np.ones(n)  # H = [1 … 1]: the states are observed through their sum
     P_last = np.empty((n, n))  # P_{k|k-1} of the last observed sample
     r_last = np.nan            # ... and its R (NaN: the last sample was not observed)
     steady = False
@@ -192,7 +174,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     G[a, c] += e_row[a] * e_row[c] / f
             if not steady:
                 # Joseph form: P = (I - K H) P (I - K H)' + K R K'
-                joseph_sum(P, K, PH, rk, A, AH)
+                joseph_covariance(P, ones, K, PH, rk, A, AH)
         # predict: x = F x ; P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
         for i in range(n):
             for c in range(m):

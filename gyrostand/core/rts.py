@@ -33,20 +33,22 @@ def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def joseph_sum(P, K, PH, r, A, AH):  # pragma: no cover - compiled
-    """The Joseph update for states observed through their sum (H = [1 … 1]):
-    A = (I − K H) P = P − K PH', AH = A H' (its row sums), then P = A (I − K H)' + K r K'
-    (:func:`joseph_finish`). ``A`` (n, n), ``AH`` (n,) work arrays."""
+def joseph_covariance(P, H, K, PH, r, B, BH):  # pragma: no cover - compiled
+    """P = (I − K H) P (I − K H)' + K r K' in place, given the gain ``K`` and PH = P H'.
+
+    (I − K H) P = P − K (H P), H P = PH' since P is symmetric; then right-multiplied by
+    (I − K H)' (:func:`joseph_finish`). ``B`` (n, n), ``BH`` (n,) work arrays.
+    """
     n = P.shape[0]
     for i in range(n):
         for j in range(n):
-            A[i, j] = P[i, j] - K[i] * PH[j]
+            B[i, j] = P[i, j] - K[i] * PH[j]
     for i in range(n):
         s = 0.0
         for j in range(n):
-            s += A[i, j]
-        AH[i] = s
-    joseph_finish(P, A, AH, K, r)
+            s += B[i, j] * H[j]
+        BH[i] = s
+    joseph_finish(P, B, BH, K, r)
 
 
 def writable(a):
@@ -102,6 +104,7 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
     K = np.empty(n)
     A = np.empty((n, n))
     AH = np.empty(n)
+    ones = np.ones(n)  # H = [1 … 1]: the states are observed through their sum
     for i in range(n):
         P[i, i] = p0[i]
     weighted = rw.shape[0] == N
@@ -127,7 +130,7 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
                 for i in range(n):
                     K[i] = PH[i] / f
                     x[i] += K[i] * e
-                joseph_sum(P, K, PH, rk, A, AH)
+                joseph_covariance(P, ones, K, PH, rk, A, AH)
         for i in range(n):
             xf[k, i] = x[i]
             for j in range(n):

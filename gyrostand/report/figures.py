@@ -127,12 +127,8 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
         _shade_segments(ax, report, scale)
     tb, sb = envelope(tt, 2 * sd)
     ax1.fill_between(tb, -sb, sb, color=BAND, alpha=0.5, lw=0, label="±2σ (predicted)")
-    ax1.plot(*envelope(tt, d.innovations), color=DATA, lw=0.5, alpha=0.7,
-             label="innovation e(k) = y(k) − ŷ(k|k−1)")
-    ax1.plot(tt, moving_mean(d.innovations, window), color=MODEL, lw=1.8,
-             label=f"moving mean over {window * samples.dt:g} s")
-    ax1.axhline(0, color="k", lw=0.6)
-    ax1.set_ylabel(f"innovation ({report.unit})")
+    _residual_trace(ax1, tt, d.innovations, window, samples.dt,
+                    "innovation e(k) = y(k) − ŷ(k|k−1)", f"innovation ({report.unit})")
     ax1.set_title(f"Residuals over time (RMS {d.rms:.3g}; shading: heating red, cooling blue)")
     ax1.legend(loc="upper left", fontsize=8, framealpha=0.85)
     sig_v = report.fit.parameters.get("white.sigma")
@@ -140,18 +136,25 @@ def residuals_over_time(samples: Samples, report: Report) -> Figure:
             else float(np.nanstd(d.smoothed)))
     ax2.axhspan(-2 * s_sm, 2 * s_sm, color=BAND, alpha=0.5, lw=0,
                 label=f"±2σ_v (σ_v = {s_sm:.3g})")
-    ax2.plot(*envelope(tt, d.smoothed), color=DATA, lw=0.5, alpha=0.7,
-             label="smoothed residual y(k) − ŷ(k|N)")
-    ax2.plot(tt, moving_mean(d.smoothed, window), color=MODEL, lw=1.8,
-             label=f"moving mean over {window * samples.dt:g} s")
-    ax2.axhline(0, color="k", lw=0.6)
-    ax2.set_ylabel(f"smoothed residual ({report.unit})")
+    _residual_trace(ax2, tt, d.smoothed, window, samples.dt,
+                    "smoothed residual y(k) − ŷ(k|N)", f"smoothed residual ({report.unit})")
     ax2.set_xlabel(xlabel)
     ax2.set_xlim(tt[0], tt[-1])
     ax2.legend(loc="upper left", fontsize=8, framealpha=0.85)
     for ax in (ax1, ax2):
         temp_twin(ax, tt, samples.temp)
     return fig
+
+
+def _residual_trace(ax: Axes, tt: np.ndarray, series: np.ndarray, window: int, dt: float,
+                    label: str, ylabel: str) -> None:
+    """One residual series on ``ax``: its envelope, its moving mean over ``window`` samples
+    and the zero line."""
+    ax.plot(*envelope(tt, series), color=DATA, lw=0.5, alpha=0.7, label=label)
+    ax.plot(tt, moving_mean(series, window), color=MODEL, lw=1.8,
+            label=f"moving mean over {window * dt:g} s")
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_ylabel(ylabel)
 
 
 def residual_vs_inputs(samples: Samples, report: Report, rate: np.ndarray,
