@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .jit import listen
-from .rts import joseph_covariance, rts_forward, writable
+from .rts import joseph_covariance, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -132,13 +132,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
             if not steady:
                 f_last = f
                 # f = H P H' + R_k, with H = [1, ..., 1]
-                f = rk
-                for i in range(n):
-                    s = 0.0
-                    for j in range(n):
-                        s += P[i, j]
-                    PH[i] = s
-                    f += s
+                f = sum_variance(P, PH, rk)
                 if f <= 0.0:
                     return E, f_out, G, -np.inf, nobs
                 logf = np.log(f)

@@ -33,6 +33,21 @@ def joseph_finish(P, B, BH, K, r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def sum_variance(P, PH, rk):  # pragma: no cover - compiled
+    """f = H P H' + R_k for states observed through their sum (H = [1 … 1]), with PH = P H'
+    (the row sums of P) written into ``PH``."""
+    n = P.shape[0]
+    f = rk
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += P[i, j]
+        PH[i] = s
+        f += s
+    return f
+
+
+@njit(cache=True, nogil=True, inline="always")
 def joseph_covariance(P, H, K, PH, r, B, BH):  # pragma: no cover - compiled
     """P = (I − K H) P (I − K H)' + K r K' in place, given the gain ``K`` and PH = P H'.
 
@@ -116,14 +131,9 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
         if not np.isnan(y[k]):
             rk = r * rw[k] if weighted else r
             # f = H P H' + R_k, H = [1, ..., 1];  K = P H' / f ;  x = x + K (y - H x)
-            f = rk
+            f = sum_variance(P, PH, rk)
             hx = 0.0
             for i in range(n):
-                s = 0.0
-                for j in range(n):
-                    s += P[i, j]
-                PH[i] = s
-                f += s
                 hx += x[i]
             if f > 0.0:  # (else a degenerate variance: the prediction stands)
                 e = y[k] - hx
