@@ -43,6 +43,7 @@ from ..validate import prepare, require_samples
 from .cov import covariance_from_hessian as covariance_from_hessian  # re-exported
 from .cov import hessian as hessian
 from .cov import observed_covariance
+from .gls import concentrated_loglik, fill_natural
 from .plain import plain_shapes
 
 log = logging.getLogger(__name__)
@@ -103,17 +104,6 @@ class _Evaluator:
 def time_bounds(dt: float, duration: float) -> tuple[float, float]:
     """Search bounds of ln τ for a physical time constant: several Δt .. the record length."""
     return float(np.log(TIME_MIN_STEPS * dt)), float(np.log(TIME_MAX_RECORDS * duration))
-
-
-def concentrated_loglik(S: float, n: int, slogf: float, concentrate: bool
-                        ) -> tuple[float, float]:
-    """``(ln L, s²)`` from the whitened residual sum of squares ``S`` of ``n`` observations
-    and ``Σ ln f``: with the common scale concentrated out, s² = S/n; else s² = 1."""
-    S = max(S, 1e-300)
-    if concentrate:
-        s2 = S / n
-        return float(-0.5 * (n * LOG_2PI + n * np.log(s2) + slogf + n)), s2
-    return float(-0.5 * (n * LOG_2PI + slogf + S)), 1.0
 
 
 class Problem:
@@ -239,13 +229,8 @@ class Problem:
         if extra is None:
             raise IdentificationError("likelihood is not finite at the optimum")
         p, theta, s2, A = extra
-        s = float(np.sqrt(s2))
-        if self.concentrate:
-            for n in self.model.names_of_kind("std"):
-                p[n] = p[n] * s
-        for n, v in zip(self.lin_free, theta, strict=True):
-            p[n] = float(v)
-        return p, A / s2, ll
+        return (fill_natural(self.model, self.concentrate, self.lin_free, p, theta, s2),
+                A / s2, ll)
 
 
 def start_grid(prob: Problem, seeds: Mapping[str, float | None]) -> list[np.ndarray]:

@@ -13,7 +13,8 @@ import numpy as np
 from ...errors import DataError, IdentificationError
 from ..data import Samples
 from ..model import LOG_2PI, Model
-from .fit import Problem, concentrated_loglik
+from .fit import Problem
+from .gls import concentrated_loglik, fill_natural
 
 log = logging.getLogger(__name__)
 
@@ -335,7 +336,6 @@ class JointProblem:
         if extra is None:
             raise IdentificationError("joint likelihood is not finite at the optimum")
         ps, theta, s2, A = extra
-        s = float(np.sqrt(s2))
         p: dict[str, float] = {}
         for r, pr in enumerate(ps):
             for name, v in pr.items():
@@ -343,9 +343,5 @@ class JointProblem:
                     p[run_key(name, r)] = v
                 else:
                     p[name] = v
-        if self.concentrate:
-            for n in self.model.names_of_kind("std"):
-                p[n] = p[n] * s
-        for n, v in zip(self.lin_free, theta, strict=True):
-            p[n] = float(v)
-        return p, A / s2, ll
+        return (fill_natural(self.model, self.concentrate, self.lin_free, p, theta, s2),
+                A / s2, ll)
