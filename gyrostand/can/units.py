@@ -17,6 +17,7 @@ parser logs it: the DBC does not say).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 __all__ = ["Conversion", "UnitError", "TEMPERATURE_UNIT", "DEFAULT_DRIFT_UNIT", "norm_unit",
@@ -101,15 +102,24 @@ class Conversion:
         return f"{self.source} -> {self.target} ({how})"
 
 
-def temperature_conversion(unit: str | None) -> Conversion | None:
-    """The conversion of a temperature in ``unit`` to °C; None when it already is (or the
-    DBC gives no unit). Raises :class:`UnitError` for a unit that is no temperature."""
+def _known(unit: str | None, table: Mapping[str, object], what: str) -> str | None:
+    """``unit`` normalised, None when blank; :class:`UnitError` ("is not ``what``") when
+    ``table`` does not know it."""
     u = norm_unit(unit)
     if not u:
         return None
-    if u not in _TEMPERATURE:
-        raise UnitError(f"unit {unit!r} is not a temperature the project converts to "
-                        f"{TEMPERATURE_UNIT} (it knows degC, K, mK, degF)")
+    if u not in table:
+        raise UnitError(f"unit {unit!r} is not {what}")
+    return u
+
+
+def temperature_conversion(unit: str | None) -> Conversion | None:
+    """The conversion of a temperature in ``unit`` to °C; None when it already is (or the
+    DBC gives no unit). Raises :class:`UnitError` for a unit that is no temperature."""
+    u = _known(unit, _TEMPERATURE, f"a temperature the project converts to "
+                                   f"{TEMPERATURE_UNIT} (it knows degC, K, mK, degF)")
+    if u is None:
+        return None
     scale, offset = _TEMPERATURE[u]
     if scale == 1.0 and offset == 0.0:
         return None
@@ -124,12 +134,10 @@ def rate_conversion(unit: str | None, target: str = DEFAULT_DRIFT_UNIT) -> Conve
     if t not in _RATE:
         raise UnitError(f"drift unit {target!r} is not an angular rate the project knows "
                         f"({', '.join(_RATE)})")
-    u = norm_unit(unit)
-    if not u:
+    u = _known(unit, _RATE, f"an angular rate the project converts to {target} (it knows "
+                            f"{', '.join(_RATE)})")
+    if u is None:
         return None
-    if u not in _RATE:
-        raise UnitError(f"unit {unit!r} is not an angular rate the project converts to "
-                        f"{target} (it knows {', '.join(_RATE)})")
     scale = _RATE[u] / _RATE[t]
     if scale == 1.0:
         return None
