@@ -10,7 +10,7 @@ from .workbench_args import add_subject_args, subject_of, subjects_of
 
 if TYPE_CHECKING:
     from ..core.diagnose.prederror import ModelError
-    from ..core.diagnose.results import Report
+    from ..core.diagnose.results import DiagnoseResult
 
 
 def add_parser(sub: Any) -> None:
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def render(rep: Report, source: str) -> str:
+def render(rep: DiagnoseResult, source: str) -> str:
     """The diagnosis as text (:func:`gyrostand.report.text.diagnosis`)."""
     from ..report.text import diagnosis
 

@@ -32,7 +32,7 @@ choose_cache_dir()  # numba's kernel cache: beside the package if writable, else
 if TYPE_CHECKING:
     from .data import Samples
     from .design.fisher import crlb
-    from .diagnose.results import Report
+    from .diagnose.results import DiagnoseResult
     from .lkf.filter import OnlineLKF
     from .lsq.fit import OnlineLSQ
     from .model import Model
@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 
 #: each public name and the submodule that defines it
 EXPORTS: dict[str, str] = {
-    "Report": "diagnose.results", "Samples": "data", "crlb": "design.fisher",
+    "DiagnoseResult": "diagnose.results", "Samples": "data", "crlb": "design.fisher",
     "REGISTRY": "registry", "identify": "registry", "OnlineLKF": "lkf.filter",
     "OnlineLSQ": "lsq.fit", "Model": "model", "TemperatureProfile": "profiles",
     "chamber_profile": "profiles", "paper_profile": "profiles", "Estimate": "results",
@@ -51,7 +51,7 @@ EXPORTS: dict[str, str] = {
 }
 
 __all__ = [
-    "REGISTRY", "Estimate", "FitResult", "Model", "OnlineLKF", "OnlineLSQ", "Report",
+    "REGISTRY", "Estimate", "FitResult", "Model", "OnlineLKF", "OnlineLSQ", "DiagnoseResult",
     "Samples", "TemperatureProfile", "chamber_profile", "crlb", "identify", "paper_profile",
     "simulate",
 ]

@@ -9,7 +9,7 @@ hierarchy. The kinds:
 * :class:`~gyrostand.core.results.FitResult` (``identify``),
 * :class:`~.views.DiagnosisView` (``diagnose``), :class:`~.views.FitStepView` (``fit``),
 * :class:`~.views.AllanView` (``allan``),
-* :class:`~.views.RunSummary` (``run``/``replay``/``demo``) and :class:`~.views.RunReport`
+* :class:`~.views.RunSummary` (``run``/``replay``/``demo``) and :class:`~.views.RunFinals`
   (a run folder's ``report.txt``),
 * :class:`~.views.ReportPage` (``report``'s HTML page, with its figures).
 

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from ..core.data import Samples
 from ..core.diagnose.diagnostics import allan_deviation
-from ..core.diagnose.results import Report
+from ..core.diagnose.results import DiagnoseResult
 from ..core.summary import DRIFT_UNIT, unit_text
 from .series import Convergence, LedgerPoint, binned_means, envelope, moving_mean
 
@@ -57,14 +57,15 @@ def temp_twin(ax: Axes, tt: np.ndarray, temp: np.ndarray) -> Axes:
     return tw
 
 
-def _shade_segments(ax: Axes, report: Report, scale: float) -> None:
+def _shade_segments(ax: Axes, report: DiagnoseResult, scale: float) -> None:
     for s in report.diagnosis.segments:
         c = SEGMENT_COLOURS.get(s["kind"])
         if c:
             ax.axvspan(s["t_start"] * scale, s["t_stop"] * scale, color=c, lw=0, zorder=0)
 
 
-def measured_vs_model(samples: Samples, report: Report, deterministic: np.ndarray) -> Figure:
+def measured_vs_model(samples: Samples, report: DiagnoseResult, deterministic: np.ndarray
+                      ) -> Figure:
     """(a) Measured drift and the open-loop model (driven by the temperature alone), the
     one-step prediction faintly; beneath, the open-loop error's 60-s moving mean with the
     ±floor band the model's own noise predicts.
@@ -112,7 +113,7 @@ def measured_vs_model(samples: Samples, report: Report, deterministic: np.ndarra
     return fig
 
 
-def residuals_over_time(samples: Samples, report: Report) -> Figure:
+def residuals_over_time(samples: Samples, report: DiagnoseResult) -> Figure:
     """(b) Innovations (±2√f band, moving mean) and smoothed residuals, temperature overlaid."""
     d = report.diagnosis
     t = samples.t - samples.t[0]
@@ -157,7 +158,7 @@ def _residual_trace(ax: Axes, tt: np.ndarray, series: np.ndarray, window: int, d
     ax.set_ylabel(ylabel)
 
 
-def residual_vs_inputs(samples: Samples, report: Report, rate: np.ndarray,
+def residual_vs_inputs(samples: Samples, report: DiagnoseResult, rate: np.ndarray,
                        deterministic: np.ndarray) -> Figure:
     """(c) Residuals against dT/dt and T, with binned means.
 
@@ -198,7 +199,7 @@ def residual_vs_inputs(samples: Samples, report: Report, rate: np.ndarray,
     return fig
 
 
-def correlations(report: Report) -> Figure:
+def correlations(report: DiagnoseResult) -> Figure:
     """(d) Residual autocorrelation and cross-correlation with each candidate's regressor."""
     d = report.diagnosis
     terms = list(d.xcorr)
@@ -237,7 +238,7 @@ def _stems(ax: Axes, lags: np.ndarray, r: np.ndarray, band: float) -> None:
     ax.grid(alpha=0.3)
 
 
-def convergence(conv: Sequence[Convergence], report: Report) -> Figure:
+def convergence(conv: Sequence[Convergence], report: DiagnoseResult) -> Figure:
     """(e) Estimates over time with ±3σ bands; the final ML estimate as reference."""
     names = list(dict.fromkeys(k for c in conv for k in c.values))
     ncol = 2 if len(names) > 3 else 1
@@ -343,7 +344,7 @@ def _wrap(label: str, width: int = 22) -> str:
     return "\n".join(out).replace(", ", ",")
 
 
-def allan(report: Report, dt: float) -> Figure:
+def allan(report: DiagnoseResult, dt: float) -> Figure:
     """(g) Allan deviation of the innovations and of the smoothed residuals, with the
     white-noise slope τ^−½."""
     d = report.diagnosis

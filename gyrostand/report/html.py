@@ -32,12 +32,12 @@ from .views import (
     FitStepView,
     Plot,
     ReportPage,
-    RunReport,
+    RunFinals,
     RunSummary,
 )
 
 if TYPE_CHECKING:
-    from ..core.diagnose.results import Report
+    from ..core.diagnose.results import DiagnoseResult
     from .views import GyroFinals
 
 __all__ = ["RENDERER", "page", "table", "figure", "e", "num"]
@@ -105,7 +105,7 @@ def _estimate(value: float, std: float, unit: str, fixed: bool, drift: str) -> s
 
 # ---- a diagnosis: shared by the diagnose page and the report ------------------------------
 
-def verdict(rep: Report, fit_command: str = FIT_RUN, adopt_command: str | None = None
+def verdict(rep: DiagnoseResult, fit_command: str = FIT_RUN, adopt_command: str | None = None
             ) -> str:
     """The verdict, its reasons, and the next step: ``fit_command --add TERM`` when a
     candidate is significant, ``adopt_command`` when the model is ADEQUATE (and its run's
@@ -128,7 +128,7 @@ def verdict(rep: Report, fit_command: str = FIT_RUN, adopt_command: str | None =
     return "\n".join(out)
 
 
-def model_error(rep: Report) -> str:
+def model_error(rep: DiagnoseResult) -> str:
     me = rep.model_error
     if me is None:
         return ""
@@ -140,7 +140,7 @@ def model_error(rep: Report) -> str:
             f"{num(h['fit_percent'], '.1f')} %.</p>")
 
 
-def parameters(rep: Report) -> str:
+def parameters(rep: DiagnoseResult) -> str:
     """The ML parameters and the residual statistics."""
     d, fit = rep.diagnosis, rep.fit
     rows = [[f"<code>{e(k)}</code>", num(x.value, ".6g"),
@@ -158,7 +158,7 @@ def parameters(rep: Report) -> str:
         ])])
 
 
-def segments(rep: Report) -> str:
+def segments(rep: DiagnoseResult) -> str:
     return table(
         ["kind", "t from (s)", "t to (s)", "T from (°C)", "T to (°C)", "n",
          "mean innovation", "innovation RMS", "mean smoothed residual"],
@@ -168,7 +168,7 @@ def segments(rep: Report) -> str:
          for g in rep.diagnosis.segments])
 
 
-def candidates(rep: Report) -> str:
+def candidates(rep: DiagnoseResult) -> str:
     """The ranked candidates (significant ones starred and highlighted), the look-alikes."""
     m = max(len(rep.candidates), 1)
     out = [f"<p>Every vocabulary term not in the model, refitted by ML and compared by "
@@ -403,7 +403,7 @@ def run_summary(view: RunSummary) -> str:
         paths=paths))
 
 
-def run_report(view: RunReport) -> str:
+def run_report(view: RunFinals) -> str:
     return page(f"gyrostand run report: {view.session}", fill(
         "run.html", session=e(view.session), meta=f"Source: {e(view.source)}.",
         counts=_counts(view.stats), gyros=_gyros(view.finals, view.truths), paths=""))
@@ -424,7 +424,7 @@ KINDS: dict[type, Callable[[Any], str]] = {
     FitStepView: fit_step,
     AllanView: allan,
     RunSummary: run_summary,
-    RunReport: run_report,
+    RunFinals: run_report,
     ReportPage: report_page,
 }
 

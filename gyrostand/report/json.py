@@ -11,7 +11,7 @@ from ..core.diagnose.joint import JointDiagnosis
 from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from . import ByKind
-from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
+from .views import AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
 
 __all__ = ["RENDERER", "document"]
 
@@ -23,6 +23,6 @@ def document(obj: Any) -> str:
 
 KINDS: dict[type, Callable[[Any], str]] = {
     kind: document for kind in (FitResult, DiagnosisView, FitStepView, AllanView, RunSummary,
-                                RunReport, ReportPage, JointFit, JointDiagnosis)}
+                                RunFinals, ReportPage, JointFit, JointDiagnosis)}
 
 RENDERER = ByKind("json", KINDS)

@@ -29,7 +29,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .. import __version__, progress
-from ..core.diagnose.results import Report
+from ..core.diagnose.results import DiagnoseResult
 from ..core.model import context
 from ..runfolder import write_atomic
 from ..workbench import Subject, run_diagnose
@@ -54,7 +54,7 @@ DOCUMENTS = {"text": "report.txt", "json": "report.json"}
 
 
 def write_report(subject: Subject, out_dir: str | Path | None = None, *,
-                 report: Report | None = None, format: str = "html",
+                 report: DiagnoseResult | None = None, format: str = "html",
                  single_file: bool = False, fit_command: str | None = None,
                  diagnose_command: str | None = None) -> Path:
     """Write the report of ``subject``'s current model; return the path of the HTML page

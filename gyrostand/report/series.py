@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..core.data import Samples
-from ..core.diagnose.results import Report
+from ..core.diagnose.results import DiagnoseResult
 from ..core.diagnose.verdict import fit_error
 from ..core.lkf.filter import estimated_names, held_names, lkf, lkf_layout
 from ..core.ml.fit import ml
@@ -160,7 +160,7 @@ def read_estimates(path: Path, t0: float | None = None) -> list[Convergence]:
     return out
 
 
-def _lkf_pass(samples: Samples, report: Report) -> Convergence:
+def _lkf_pass(samples: Samples, report: DiagnoseResult) -> Convergence:
     model, p = report.model, report.fit.values
     layout = lkf_layout(model)  # ModelError when the LKF cannot represent the model
     held = {k: abs(p[k]) for k in held_names(model)}
@@ -176,7 +176,7 @@ def _lkf_pass(samples: Samples, report: Report) -> Convergence:
                        held=tuple(held))
 
 
-def _ml_windows(samples: Samples, report: Report) -> Convergence:
+def _ml_windows(samples: Samples, report: DiagnoseResult) -> Convergence:
     n = len(samples)
     ends = sorted({int(round(n * k / ML_WINDOWS)) for k in range(1, ML_WINDOWS + 1)})
     ends = [e for e in ends if e >= min(ML_MIN_WINDOW, n)]
@@ -200,7 +200,7 @@ def _ml_windows(samples: Samples, report: Report) -> Convergence:
     return Convergence("ML on the data up to each time", t, vals, stds, points=True)
 
 
-def convergence(subject: Subject, report: Report) -> tuple[list[Convergence], str]:
+def convergence(subject: Subject, report: DiagnoseResult) -> tuple[list[Convergence], str]:
     """Estimates over time, and a sentence saying where they come from."""
     if subject.run_dir is not None:
         path = estimates_path(subject.run_dir, subject.gyro)
@@ -268,7 +268,7 @@ def _num(d: Mapping[str, Any], key: str) -> float:
     return float(v) if isinstance(v, int | float) else math.nan
 
 
-def ledger_points(steps: list[dict[str, Any]], report: Report,
+def ledger_points(steps: list[dict[str, Any]], report: DiagnoseResult,
                   samples: Samples | None = None) -> list[LedgerPoint]:
     """One point per model change (the latest numbers of each model), then the current
     model if it differs, then — when a candidate is significant — what adding it gives

@@ -17,11 +17,11 @@ from ..core.summary import fit_table, unit_text
 from . import ByKind
 from .allan_text import allan
 from .lackfit import reference
-from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunReport, RunSummary
+from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
 
 if TYPE_CHECKING:
     from ..core.diagnose.prederror import ModelError
-    from ..core.diagnose.results import Report
+    from ..core.diagnose.results import DiagnoseResult
     from .views import GyroFinals
 
 __all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step",
@@ -46,7 +46,7 @@ def fit_result(r: FitResult) -> str:
 
 # ---- diagnose ----------------------------------------------------------------------------
 
-def diagnosis(rep: Report, source: str, fit_command: str = FIT_RUN,
+def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
               adopt_command: str | None = None) -> str:
     """The verdict, model error, parameters, residual statistics, per-segment table and the
     ranked candidates of one diagnosis of the data ``source``; the next step, when a
@@ -325,7 +325,7 @@ def run_summary(view: RunSummary) -> str:
     return "\n".join(lines)
 
 
-def run_report(view: RunReport) -> str:
+def run_report(view: RunFinals) -> str:
     """``report.txt``: the counts of the run and the final table per gyro."""
     stats = view.stats
     dec = stats.get("decoder", {})
@@ -453,7 +453,7 @@ KINDS: dict[type, Callable[[Any], str]] = {
     FitStepView: lambda v: _with_ledger(fit_step(v), v),
     AllanView: allan,
     RunSummary: run_summary,
-    RunReport: run_report,
+    RunFinals: run_report,
     ReportPage: _report_page,
 }
 

@@ -18,14 +18,14 @@ from ..runfolder import json_safe
 
 if TYPE_CHECKING:
     from ..core.diagnose.allan import AllanTable
-    from ..core.diagnose.results import Report
+    from ..core.diagnose.results import DiagnoseResult
     from ..core.model import Model
     from ..core.results import FitResult
     from ..workbench import FitStep, Subject
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DiagnosisView", "FitStepView", "AllanView", "RunSummary", "RunReport",
+__all__ = ["DiagnosisView", "FitStepView", "AllanView", "RunSummary", "RunFinals",
            "ReportPage", "Plot", "GyroFinals", "RunEnd"]
 
 
@@ -82,7 +82,7 @@ class DiagnosisView:
     """A diagnosis (``diagnose``): ``source`` names the data (e.g. ``run.csv (gyro az)``),
     ``ledger`` the ledger the step was written to (text only)."""
 
-    report: Report
+    report: DiagnoseResult
     source: str
     ledger: Path | None = None
     allan: AllanView | None = None
@@ -135,7 +135,7 @@ class AllanView:
                    resid)
 
     @classmethod
-    def of_diagnosis(cls, subject: Subject, report: Report) -> AllanView | None:
+    def of_diagnosis(cls, subject: Subject, report: DiagnoseResult) -> AllanView | None:
         """:meth:`of` the diagnosis's ML fit in its unit, or None (logged) where the data
         are too short for an Allan table."""
         try:
@@ -173,7 +173,7 @@ class RunSummary:
 
 
 @dataclass(frozen=True)
-class RunReport:
+class RunFinals:
     """A run folder's ``report.txt``: session ``session`` from ``source``, the final fits
     of every gyro, the run's ``stats``, the simulation's ``truths`` where known."""
 
@@ -208,7 +208,7 @@ class ReportPage:
     figure's estimates come from, and when and by which version the page was written."""
 
     subject: Subject
-    report: Report
+    report: DiagnoseResult
     plots: Sequence[Plot]
     steps: Sequence[Mapping[str, Any]]
     conv_source: str

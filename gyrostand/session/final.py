@@ -209,6 +209,6 @@ def write_report(path: Path, cfg: SessionConfig, source: str, finals: Sequence[G
     """``report.txt``: the final table per gyro and the counts of the run
     (:func:`gyrostand.report.text.run_report`)."""
     from ..report import render
-    from ..report.views import RunReport
+    from ..report.views import RunFinals
 
-    write_atomic(path, render(RunReport(cfg.name, source, finals, stats, truths), "text"))
+    write_atomic(path, render(RunFinals(cfg.name, source, finals, stats, truths), "text"))

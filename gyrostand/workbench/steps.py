@@ -18,7 +18,7 @@ from ..core.design.separation import design_command
 from ..core.diagnose.candidates import candidate_terms, term_test
 from ..core.diagnose.prederror import ModelError
 from ..core.diagnose.reference import reference_fit
-from ..core.diagnose.results import TEST_CHI2, Report
+from ..core.diagnose.results import TEST_CHI2, DiagnoseResult
 from ..core.diagnose.verdict import diagnose, fit_error
 from ..core.ml.fit import ml
 from ..core.model import Model
@@ -49,7 +49,8 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagnose") -> Report:
+def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagnose"
+                 ) -> DiagnoseResult:
     """Diagnose the subject's current model; append the step to the ledger. Its stages
     show as ``command``'s progress (:mod:`gyrostand.progress`, on in the CLI only)."""
     from .. import progress
@@ -81,7 +82,7 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
     return rep
 
 
-def with_design_commands(rep: Report, subject: Subject) -> Report:
+def with_design_commands(rep: DiagnoseResult, subject: Subject) -> DiagnoseResult:
     """``rep`` with each look-alike pair's ``command``: the ``gyrostand design --separate``
     run that tells them apart within this run's limits (:func:`design_command`)."""
     source = subject.run_dir if subject.run_dir is not None else subject.samples.source

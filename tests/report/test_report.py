@@ -143,7 +143,7 @@ def test_ledger_steps_show_and_a_report_does_not_write_the_ledger(chamber_csv, t
 
 
 def test_ledger_points_follow_model_changes():
-    class R:  # the parts of a Report that ledger_points reads
+    class R:  # the parts of a DiagnoseResult that ledger_points reads
         model = Model.parse("markov,temp,bias,temp_rate")
         diagnosis = type("D", (), {"rms": 0.9})()
         fit = type("F", (), {"loglik": -5.0})()

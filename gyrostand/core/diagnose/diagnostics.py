@@ -115,7 +115,7 @@ def candidate_regressor(term: str, ctx: Context, p: Mapping[str, float]) -> np.n
 
 
 @dataclass(frozen=True)
-class Diagnosis:
+class ResidualDiagnostics:
     """Residual diagnostics of one fit (arrays aligned with the samples)."""
 
     innovations: np.ndarray
@@ -153,7 +153,7 @@ class Diagnosis:
 
 
 def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None,
-                 xcorr_lags: int = 60) -> Diagnosis:
+                 xcorr_lags: int = 60) -> ResidualDiagnostics:
     """Residual diagnostics of an ML fit of ``result.model`` to ``samples``."""
     model: Model = result.model
     p = result.values
@@ -206,7 +206,7 @@ def diagnose_fit(result: FitResult, samples: Samples, *, lags: int | None = None
         })
     taus, adev = allan_deviation(smoothed, samples.dt)
     finite = np.isfinite(e)
-    return Diagnosis(
+    return ResidualDiagnostics(
         innovations=e, standardized=z, smoothed=smoothed, fitted=fitted,
         rms=float(np.sqrt(np.mean(e[finite] ** 2))),
         smoothed_rms=float(np.sqrt(np.nanmean(smoothed**2))),

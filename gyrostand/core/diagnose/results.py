@@ -1,5 +1,5 @@
 """What a diagnosis reports: each candidate term's test (:class:`Candidate`) and the
-diagnosis of a model on a data set (:class:`Report`), with the reference distributions a
+diagnosis of a model on a data set (:class:`DiagnoseResult`), with the reference distributions a
 candidate's likelihood ratio is judged by (``Candidate.test``)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 from ..model import Model
 from ..results import Estimate, FitResult
 from ..summary import DRIFT_UNIT, unit_text
-from .diagnostics import Diagnosis
+from .diagnostics import ResidualDiagnostics
 from .prederror import ModelError
 from .reference import Reference
 
@@ -76,12 +76,12 @@ class Candidate:
 
 
 @dataclass(frozen=True)
-class Report:
+class DiagnoseResult:
     """The diagnosis of a model on a data set: fit, residuals, ranked candidates, verdict."""
 
     model: Model
     fit: FitResult
-    diagnosis: Diagnosis
+    diagnosis: ResidualDiagnostics
     candidates: tuple[Candidate, ...]
     adequate: bool
     alpha: float

@@ -41,14 +41,14 @@ from .candidates import (
     refit_from_candidates,
     term_test,
 )
-from .diagnostics import Diagnosis, diagnose_fit, segments
+from .diagnostics import ResidualDiagnostics, diagnose_fit, segments
 from .prederror import ModelError, model_error
 from .reference import (
     REPORT_ALPHA,
     Reference,
     reference_fit,
 )
-from .results import Candidate, Report
+from .results import Candidate, DiagnoseResult
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +88,7 @@ def _reference(samples: Samples, fit: FitResult) -> Reference | None:
 
 
 def checks(fit: FitResult, samples: Samples, unit: str, ref: Reference | None
-           ) -> tuple[Diagnosis, ModelError]:
+           ) -> tuple[ResidualDiagnostics, ModelError]:
     """The residual diagnostics of ``fit`` and its model error with the floor of its
     reference ``ref``."""
     return diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref)
@@ -106,7 +106,7 @@ def _also(ref: Reference | None) -> dict[str, float] | None:
 DEGENERATE_MIN, DEGENERATE_LR = 3, 1e-6
 
 
-def verdict_reasons(diag: Diagnosis, err: ModelError, ref: Reference | None,
+def verdict_reasons(diag: ResidualDiagnostics, err: ModelError, ref: Reference | None,
                     sig: list[Candidate], alpha: float, m: int, unit: str) -> list[str]:
     """Why the model is not adequate (empty: it is)."""
     reasons = []
@@ -171,7 +171,7 @@ def redundant_terms(samples: Samples, model: Model, fit: FitResult, alpha: float
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
              unit: str = DRIFT_UNIT,
-             on_candidate: Callable[[str], None] | None = None) -> Report:
+             on_candidate: Callable[[str], None] | None = None) -> DiagnoseResult:
     """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
 
     A significant candidate whose effect is not identified sends the current model back to
@@ -224,7 +224,7 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                      "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit)
-    return Report(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
+    return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
                   redundant=tuple(redundant_terms(samples, model, fit, alpha))
                   if not reasons else (),
