@@ -87,6 +87,33 @@ def test_cut_asc_frame_lines_are_skipped_lines_with_warnings(session, tmp_path, 
     assert all("cut short" in n or "cannot parse" in n for n in notes)
 
 
+def test_an_asc_line_python_can_cannot_parse_is_skipped_and_reading_goes_on(
+        session, tmp_path, capsys):
+    """python-can's ASC reader raises on a data byte that is not hex; the same reader goes
+    on after the line (public API: its header ends again at the line we give it), with
+    its start time kept: every other frame at its own time."""
+    cfg_path, frames = session
+    from gyrostand.can.logs.read import LogDamage, read_log
+
+    log = _log(tmp_path / "bad.asc", frames)
+    clean = [m.timestamp for m in read_log(log, LogDamage())]
+    lines = log.read_text().splitlines(keepends=True)
+    body = [i for i, ln in enumerate(lines) if " Tx " in ln]
+    assert len(body) == len(clean) == len(frames)
+    bad = [body[100], body[2000]]
+    for i in bad:
+        lines[i] = lines[i].replace(" d 8 ", " d 8 ZZ ", 1)
+    log.write_text("".join(lines))
+    rc, doc, err = _replay(cfg_path, log, tmp_path, capsys, "--reader", "inline")
+    assert rc == 0, err
+    assert doc["stats"]["log"]["lines_skipped"] == 2
+    assert doc["stats"]["decoder"]["received"] == len(frames) - 2
+    assert [n.split(": ")[1] for n in doc["stats"]["log"]["notes"]] == [
+        f"line {i + 1}" for i in bad]
+    got = [m.timestamp for m in read_log(log, LogDamage())]
+    assert got == [t for k, t in enumerate(clean) if k not in (100, 2000)]
+
+
 def test_a_csv_cell_over_128_kib_is_an_error_naming_the_line(tmp_path, capsys):
     rows = ["t,drift,temp"] + [f"{i}.0,0.1,20.0" for i in range(10)]
     rows[6] += ',"' + "A" * 200_000 + '"'

@@ -13,7 +13,6 @@ Used by :func:`~gyrostand.can.logs.read.read_log`.
 
 from __future__ import annotations
 
-import copy
 import re
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -154,9 +153,11 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 if suffix == ".csv":
                     lines.unread(header)
                     reader = make()
-                else:
-                    nxt = copy.copy(reader)  # same file (at the next line), same state
-                    nxt._extract_header = lambda: None
-                    reader = nxt
+                elif suffix == ".asc":
+                    # the same reader goes on (its base and start time kept); iterating
+                    # reads a header first: give it the line that ends one, with the
+                    # value it has (the file's next line would be taken as header)
+                    lines.unread("internal events logged" if reader.internal_events_logged
+                                 else "no internal events logged")
     finally:
         lines.close()
