@@ -40,7 +40,7 @@ import numpy as np
 from ..can.bus import STATUS_CODES
 from ..core.model import Model
 from ..core.summary import unit_text
-from ..errors import DataError, GyrostandError, OutputError
+from ..errors import DataError, GyrostandError, MissingPackageError, OutputError
 from ..runfolder import (
     SAMPLES_COLUMNS,
     estimates_path,
@@ -60,7 +60,7 @@ PANDAS_ATTRS = "PANDAS_ATTRS"
 log = logging.getLogger(__name__)
 
 
-class ExportError(GyrostandError, ImportError):
+class ExportError(MissingPackageError):
     """An export format whose optional package is not installed."""
 
 

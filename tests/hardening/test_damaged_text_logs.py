@@ -6,9 +6,9 @@
   enough values to unpack", the replay failed after 100 frames);
 - 40 ASC frame lines cut short anywhere after their first character are 40 skipped lines
   with warnings (before: 38 of them vanished silently, ``lines_skipped 2``);
-- a CSV cell over 128 KiB is an error naming the file and line, exit 2 (before:
+- a CSV cell over 128 KiB is an error naming the file and line, exit 65 (before:
   ``_csv.Error: field larger than field limit`` as a traceback);
-- an empty or headless BLF is an error naming the file, exit 2 (before: "unpack requires
+- an empty or headless BLF is an error naming the file, exit 65 (before: "unpack requires
   a buffer of 72 bytes").
 
 Logs written by python-can's own writers (:class:`can.Logger`)."""
@@ -21,6 +21,7 @@ import random
 import can
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 from .procs import simulated_session
@@ -119,12 +120,12 @@ def test_a_csv_cell_over_128_kib_is_an_error_naming_the_line(tmp_path, capsys):
     rows[6] += ',"' + "A" * 200_000 + '"'
     csv = tmp_path / "big.csv"
     csv.write_text("\n".join(rows) + "\n")
-    assert cli_main(["identify", str(csv)]) == 2
+    assert cli_main(["identify", str(csv)]) == exitcodes.DATAERR
     assert capsys.readouterr().err == (f"error: {csv}: line 7: not CSV (field larger than "
                                        f"field limit (131072))\n")
     man = tmp_path / "man.csv"
     man.write_text('path\n"' + "A" * 200_000 + '"\n')
-    assert cli_main(["batch", "--out", str(tmp_path / "b"), "--manifest", str(man)]) == 2
+    assert cli_main(["batch", "--out", str(tmp_path / "b"), "--manifest", str(man)]) == exitcodes.DATAERR
     assert capsys.readouterr().err == (f"error: {man}: line 2: not CSV (field larger than "
                                        f"field limit (131072))\n")
 
@@ -138,5 +139,5 @@ def test_an_empty_blf_is_an_error_naming_it(session, tmp_path, capsys, size, wha
     log = tmp_path / "empty.blf"
     log.write_bytes(whole[:size])
     rc, _, err = _replay(cfg_path, log, tmp_path, capsys)
-    assert rc == 2
+    assert rc == exitcodes.DATAERR
     assert err.splitlines()[-1] == f"error: {log}: not a BLF log: {what}"

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from sessionhelpers import write_cfg_yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.framesim import write_log
 from gyrostand.cli import main
 from gyrostand.config import load_config
@@ -141,11 +142,11 @@ def test_mf4_round_trip(run_dir, tmp_path, capsys):
 
 
 def test_errors(run_dir, tmp_path, capsys, monkeypatch):
-    assert main(["export", str(run_dir)]) == 2
+    assert main(["export", str(run_dir)]) == exitcodes.USAGE
     assert "choose a format: --parquet and/or --mf4" in capsys.readouterr().err
-    assert main(["export", str(tmp_path), "--parquet"]) == 2
+    assert main(["export", str(tmp_path), "--parquet"]) == exitcodes.NOINPUT
     assert "not a run folder (no result.json)" in capsys.readouterr().err
-    assert main(["export", str(run_dir), "--parquet", "--gyro", "zz"]) == 2
+    assert main(["export", str(run_dir), "--parquet", "--gyro", "zz"]) == exitcodes.DATAERR
     assert "no gyro 'zz' (the run has az)" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed
     with pytest.raises(ExportError, match=r"pip install 'gyrostand\[formats\]'"):
@@ -234,5 +235,5 @@ def test_bad_formats_are_config_errors_naming_the_key(run_dir, tmp_path, monkeyp
         load_config(path)
     capsys.readouterr()
     assert main(["replay", str(cfg_path), str(tmp_path / "none.blf"), "--data-format",
-                 "parquet"]) == 2
+                 "parquet"]) == exitcodes.CONFIG
     assert "error: --data-format: parquet needs the pyarrow package" in capsys.readouterr().err

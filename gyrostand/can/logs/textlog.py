@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import LogError
 
 if TYPE_CHECKING:
     from gyrostand.can.logs.read import LogDamage
@@ -129,7 +129,7 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
         reader = make()
     except Exception as exc:
         lines.close()
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
+        raise LogError(f"{path}: cannot read CAN log: {exc}") from exc
     try:
         at = -1
         while True:
@@ -144,8 +144,8 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 return
             except Exception as exc:
                 if lines.n == at:  # nothing more was read: not a line's fault
-                    raise CanEdgeError(f"{path}: corrupt CAN log after line {at}: "
-                                       f"{type(exc).__name__}: {exc}") from exc
+                    raise LogError(f"{path}: corrupt CAN log after line {at}: "
+                                   f"{type(exc).__name__}: {exc}") from exc
                 at = lines.n
                 damage.lines += 1
                 damage.warn(f"{path}: line {lines.n}: cannot parse, skipped "
