@@ -1,26 +1,21 @@
 """The exit status of every ``gyrostand`` command: BSD ``sysexits.h`` numbers.
 
-=====  ===============  ==========================================================
-code   name             meaning
-=====  ===============  ==========================================================
-0      OK               the command did what it was asked
-64     USAGE            the command line is wrong (argparse's errors, bad option
-                        values or combinations)
-65     DATAERR          the input data are bad: a log that decodes nothing, a damaged
-                        file that cannot be read, frames lost that were acknowledged,
-                        data an identifier cannot fit
-66     NOINPUT          an input file or folder is missing or unreadable
-69     UNAVAILABLE      the CAN bus cannot be opened (or stays lost), no frame on it;
-                        an optional package the command needs is not installed
-70     SOFTWARE         an internal error (an uncaught exception: a bug, please report)
-73     CANTCREAT        an output file or folder cannot be created (no permission, a
-                        file where a folder should be)
-74     IOERR            a write failed: disk full, file too large, I/O error, the run
-                        folder removed while written
-78     CONFIG           the session file, its DBC or its mapping is wrong; ``run
-                        --check`` refuses it
-130    INTERRUPTED      Ctrl-C (128 + SIGINT, the shell's convention)
-=====  ===============  ==========================================================
+* 0 ``OK``: the command did what it was asked;
+* 64 ``USAGE``: the command line is wrong (argparse's errors, bad option values or
+  combinations);
+* 65 ``DATAERR``: the input data are bad: a log that decodes nothing, a damaged file that
+  cannot be read, data an identifier cannot fit;
+* 66 ``NOINPUT``: an input file or folder is missing or unreadable;
+* 69 ``UNAVAILABLE``: the CAN bus cannot be opened (or stays lost), no frame on it; an
+  optional package the command needs is not installed;
+* 70 ``SOFTWARE``: an internal error (an uncaught exception: a bug, please report it);
+* 73 ``CANTCREAT``: an output file or folder cannot be created (no permission, a file
+  where a folder should be, an existing file without ``--force``);
+* 74 ``IOERR``: a write failed: disk full, file too large, I/O error, the run folder
+  removed while written;
+* 78 ``CONFIG``: the session file, its DBC or its mapping is wrong; ``run --check``
+  refuses it;
+* 130: Ctrl-C (128 + SIGINT, the shell's convention).
 
 No command exits 1 today: 1 is kept for a command whose answer is negative by design (a
 check that ran and says no); Python's own exit on an uncaught exception is mapped to 70.
@@ -59,7 +54,7 @@ OK = 0
 NEGATIVE = 1
 #: the command line is wrong: an unknown option, a bad value, a bad combination
 USAGE = 64
-#: the input data are bad: nothing decoded, a damaged file, acknowledged frames lost
+#: the input data are bad: nothing decoded, a damaged file, data no identifier can fit
 DATAERR = 65
 #: an input file or folder is missing or unreadable
 NOINPUT = 66
@@ -81,7 +76,7 @@ INTERRUPTED = 130
 MEANING: dict[int, tuple[str, str]] = {
     OK: ("OK", "done"),
     USAGE: ("USAGE", "the command line is wrong"),
-    DATAERR: ("DATAERR", "bad input data (nothing decoded, a damaged file, frames lost)"),
+    DATAERR: ("DATAERR", "bad input data (nothing decoded, a damaged file)"),
     NOINPUT: ("NOINPUT", "an input file or folder is missing or unreadable"),
     UNAVAILABLE: ("UNAVAILABLE", "the CAN bus cannot be opened or is lost; a package "
                                  "the command needs is missing"),

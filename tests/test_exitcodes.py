@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import subprocess
 import sys
+from pathlib import Path
 
 import can
 import pytest
@@ -93,10 +94,7 @@ def test_an_uncaught_exception_is_70_with_one_line(monkeypatch, capsys, tmp_path
 
 
 def test_a_replay_that_decodes_nothing_exits_65_with_one_error_line(tmp_path):
-    from sessionhelpers import write_cfg_yaml
-
-    cfg = write_cfg_yaml(tmp_path / "s.yaml", tmp_path / "runs",
-                         {"interface": "virtual", "channel": "exitcodes"})
+    cfg = Path(__file__).resolve().parent.parent / "configs" / "demo.yaml"
     log = tmp_path / "other.blf"
     with can.Logger(str(log)) as w:
         for i in range(200):
