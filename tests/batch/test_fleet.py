@@ -137,10 +137,11 @@ def test_without_dask_the_error_names_the_extra(monkeypatch, capsys):
 
 
 def test_bad_steps_and_models_are_usage_errors_before_any_work(capsys, tmp_path):
-    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "fit"]) == exitcodes.USAGE
+    out = str(tmp_path / "o")
+    assert main(["batch", str(tmp_path), "--out", out, "--do", "fit"]) == exitcodes.USAGE
     assert "--do 'fit': steps are replay, identify, diagnose (got fit)" in \
         capsys.readouterr().err
-    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "replay"]) == exitcodes.USAGE
+    assert main(["batch", str(tmp_path), "--out", out, "--do", "replay"]) == exitcodes.USAGE
     assert "give identify and/or diagnose" in capsys.readouterr().err
     assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--model",
                  "markov,nosuchterm"]) == exitcodes.USAGE

@@ -94,7 +94,8 @@ def test_bad_bus_arguments_are_usage_errors(tmp_path, home, capsys):
     assert exc.value.code == exitcodes.USAGE
     assert ("argument --bus-kwargs: expected KEY=VALUE (a python-can bus argument), got "
             "'no-equals-sign'") in capsys.readouterr().err
-    assert main(["run", str(path), "--check", "-c", "a", "--bus-kwargs", "channel=b"]) == exitcodes.USAGE
+    assert main(["run", str(path), "--check", "-c", "a", "--bus-kwargs", "channel=b"]) == \
+        exitcodes.USAGE
     assert "error: --bus-kwargs: channel is also given by its own option (--channel)" in \
         capsys.readouterr().err
     bad = _session(tmp_path, [])

@@ -125,7 +125,8 @@ def test_bad_param_is_an_error_naming_it(tmp_path):
     p = subprocess.run([sys.executable, "-m", "gyrostand", "design", "--model", "markov,temp",
                         "--param", "temp.gamma", "--out", str(tmp_path)],
                        capture_output=True, text=True, timeout=120)
-    assert p.returncode == exitcodes.USAGE and "--param 'temp.gamma': expected NAME=VALUE" in p.stderr
+    assert p.returncode == exitcodes.USAGE
+    assert "--param 'temp.gamma': expected NAME=VALUE" in p.stderr
 
 
 @pytest.mark.slow

@@ -1,5 +1,6 @@
 """Crashes of the third hostile round (issue 28, "Crashes"), through the command line's
-main entry: each is one clear ``error: ...`` line naming the problem and an exit status by its kind (64 usage, 65 data, 66 input)
+main entry: each is one clear ``error: ...`` line naming the problem and an exit status
+by its kind (64 usage, 65 data, 66 input)
 (before: a traceback from ValueError, scipy's _MaxFuncCallError, numpy's
 _ArrayMemoryError after trying to allocate 26.8 GiB, and pathlib's RuntimeError)."""
 

@@ -125,7 +125,8 @@ def test_a_csv_cell_over_128_kib_is_an_error_naming_the_line(tmp_path, capsys):
                                        f"field limit (131072))\n")
     man = tmp_path / "man.csv"
     man.write_text('path\n"' + "A" * 200_000 + '"\n')
-    assert cli_main(["batch", "--out", str(tmp_path / "b"), "--manifest", str(man)]) == exitcodes.DATAERR
+    assert cli_main(["batch", "--out", str(tmp_path / "b"), "--manifest", str(man)]) == \
+        exitcodes.DATAERR
     assert capsys.readouterr().err == (f"error: {man}: line 2: not CSV (field larger than "
                                        f"field limit (131072))\n")
 

@@ -85,6 +85,7 @@ def test_replay_onto_a_full_disk_at_start_is_one_error(stand, tmpfs):
         except OSError:
             pass
     r = _replay(cfg_path, log, disk)
-    assert r.returncode == exitcodes.IOERR, (r.stdout[-2000:], r.stderr[-2000:])  # a fault, not bad input
+    # a failed write, not bad input
+    assert r.returncode == exitcodes.IOERR, (r.stdout[-2000:], r.stderr[-2000:])
     assert "No space left on device" in r.stderr and str(disk) in r.stderr
     assert "Traceback" not in r.stderr and "Logging error" not in r.stderr

@@ -1,5 +1,5 @@
-"""A run folder removed while ``gyrostand run`` writes it is a failed write, exit 74 (IOERR) naming the
-file (issue 28, "Exit codes"; before: exit 2, bad input, which systemd does not restart:
+"""A run folder removed while ``gyrostand run`` writes it is a failed write, exit 74
+(IOERR) naming the file (issue 28, "Exit codes"; before: exit 2, bad input, which systemd does not restart:
 a raw FileNotFoundError reached the command line)."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Hostile input (issue 11, "crashes and hangs", "wrong results without a warning"): every
-case is a clean ``error: ...`` naming the input (an exit status by its kind, 64..78), never a traceback, a hang
-or a silently wrong answer. Random bytes as session files and ledgers (hypothesis) give a
+case is a clean ``error: ...`` naming the input (an exit status by its kind, 64..78),
+never a traceback, a hang or a silently wrong answer. Random bytes as session files and ledgers (hypothesis) give a
 ConfigError / DataError and nothing else."""
 
 from __future__ import annotations

@@ -52,7 +52,8 @@ def test_a_replay_that_decodes_nothing_is_bad_input_naming_the_ids_seen(tmp_path
         for i in range(3050):
             w.on_message_received(_strangers(i))
     path = _session(tmp_path)
-    assert main(["replay", str(path), str(log), "--out", str(tmp_path / "r"), *extra]) == exitcodes.DATAERR
+    assert main(["replay", str(path), str(log), "--out", str(tmp_path / "r"), *extra]) == \
+        exitcodes.DATAERR
     err = capsys.readouterr().err.splitlines()
     (run_dir,) = (tmp_path / "r").iterdir()
     # 3050 frames: 50 extended; of the other 3000, 1000 are 0x456
@@ -111,7 +112,8 @@ def test_a_run_on_a_bus_of_strangers_is_bad_input_and_a_silent_bus_a_fault(tmp_p
     assert set(dec["unknown_ids"]) == {"0x123", "0x456"}
     # nobody on the bus: nothing received, a fault
     silent = _session(tmp_path, f"silent-{os.getpid()}")
-    assert main(["run", str(silent), "--duration", "0.2", "--out", str(tmp_path / "b")]) == exitcodes.UNAVAILABLE
+    assert main(["run", str(silent), "--duration", "0.2", "--out", str(tmp_path / "b")]) == \
+        exitcodes.UNAVAILABLE
     (run_dir,) = (tmp_path / "b").iterdir()
     assert capsys.readouterr().err.splitlines()[-1] == (
         f"error: run: no CAN frame received on the bus, nothing measured; the run folder "
