@@ -36,3 +36,39 @@ class CanEdgeError(GyrostandError, RuntimeError):
 class OutputError(GyrostandError, OSError):
     """A file of a run that cannot be written (disk full, no permission, not a folder);
     the message names the path."""
+
+
+# Finer kinds, one exit status each (gyrostand.exitcodes): each also is the kind above it,
+# so ``except ConfigError`` / ``except DataError`` / ``except CanEdgeError`` still catch it.
+
+
+class UsageError(ConfigError):
+    """The command line used wrongly: an option's value, or a combination of options,
+    that argparse cannot check (exit 64)."""
+
+
+class NoInputError(DataError):
+    """An input file or folder that is missing or cannot be read: a run folder, a log, a
+    CSV (exit 66)."""
+
+
+class LogNotFoundError(NoInputError, CanEdgeError):
+    """A CAN log file that does not exist (exit 66)."""
+
+
+class SessionFileNotFoundError(NoInputError, ConfigError):
+    """A session file that does not exist or cannot be read (exit 66)."""
+
+
+class LogError(CanEdgeError):
+    """A CAN log that cannot be read: not a log, a damaged header, a reader that fails
+    (exit 65)."""
+
+
+class BusUnavailableError(CanEdgeError):
+    """A CAN bus that cannot be opened, or sent on (exit 69)."""
+
+
+class MissingPackageError(GyrostandError, ImportError):
+    """An optional package a command needs is not installed; the message names the extra
+    to install (exit 69)."""

@@ -32,7 +32,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, NoInputError
 
 __all__ = ["RunSpec", "collect_runs", "read_manifest"]
 
@@ -65,7 +65,7 @@ def _expand(item: str) -> list[Path]:
     if glob.has_magic(item):
         hits = sorted(glob.glob(item, recursive=True))
         if not hits:
-            raise DataError(f"{item}: the pattern matches no file or folder")
+            raise NoInputError(f"{item}: the pattern matches no file or folder")
         return [Path(h) for h in hits]
     return [Path(item)]
 
@@ -76,7 +76,7 @@ def _resolve(path: Path, where: str = "") -> Path:
     try:
         return path.resolve()
     except (RuntimeError, OSError) as exc:
-        raise DataError(f"{where}{path}: cannot resolve the path ({exc})") from None
+        raise NoInputError(f"{where}{path}: cannot resolve the path ({exc})") from None
 
 
 def _spec(path: Path, config: str | Path | None, attrs: dict[str, str], name: str | None,
@@ -84,7 +84,7 @@ def _spec(path: Path, config: str | Path | None, attrs: dict[str, str], name: st
     path = _resolve(path, where)
     if path.is_dir():
         if not _is_run_folder(path):
-            raise DataError(f"{where}{path}: not a run folder (no result.json, no raw.blf)")
+            raise NoInputError(f"{where}{path}: not a run folder (no result.json, no raw.blf)")
         kind = "folder"
     elif path.is_file():
         kind = "log"
@@ -92,7 +92,7 @@ def _spec(path: Path, config: str | Path | None, attrs: dict[str, str], name: st
             raise ConfigError(f"{where}{path}: a raw log needs the session file that decodes "
                               "it: --config FILE, or a 'config' column in the manifest")
     else:
-        raise DataError(f"{where}{path}: no such run folder or log file")
+        raise NoInputError(f"{where}{path}: no such run folder or log file")
     cfg = str(_resolve(Path(config), where)) if config is not None else None
     if cfg is not None and not Path(cfg).is_file():
         raise ConfigError(f"{where}{cfg}: no such session file")

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import GyrostandError
+from ..errors import GyrostandError, MissingPackageError
 from .inputs import RunSpec
 from .tasks import RECORD_VERSION, TaskOptions, failed_record, read_record, run_task
 
@@ -39,7 +39,7 @@ def require_dask() -> None:
 
     for mod in ("dask", "distributed"):
         if importlib.util.find_spec(mod) is None:
-            raise GyrostandError(f"no module {mod!r}: {INSTALL_HINT}")
+            raise MissingPackageError(f"no module {mod!r}: {INSTALL_HINT}")
 
 
 @dataclass

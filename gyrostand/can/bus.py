@@ -31,7 +31,7 @@ from gyrostand.can.codes import (
 from gyrostand.can.dbc import MessageRef, find_message
 from gyrostand.can.pack import packer
 from gyrostand.core.terms.builtin import VOCABULARY, summary_bits
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import BusUnavailableError, CanEdgeError
 
 __all__ = [
     "open_bus",
@@ -90,8 +90,11 @@ def open_bus(bus_cfg: Mapping[str, Any]) -> can.BusABC:
     where = f"interface={bus_cfg.get('interface')!r} channel={bus_cfg.get('channel')!r}"
     try:
         return can.Bus(**dict(bus_cfg))
-    except Exception as exc:  # CanError, ImportError of a driver, OSError, TypeError...
+    except (can.CanInterfaceNotImplementedError, ImportError, TypeError, ValueError) as exc:
+        # an unknown interface, a driver not installed, bad arguments: the configuration
         raise CanEdgeError(f"cannot open CAN bus ({where}): {exc}") from exc
+    except Exception as exc:  # CanError, OSError...: the bus is not there (now)
+        raise BusUnavailableError(f"cannot open CAN bus ({where}): {exc}") from exc
 
 
 
@@ -293,8 +296,8 @@ class FrameEncoder:
             try:
                 self.bus.send(f, timeout=timeout)
             except Exception as exc:
-                raise CanEdgeError(f"cannot send frame 0x{f.arbitration_id:X} on "
-                                   f"{self.bus.channel_info}: {exc}") from exc
+                raise BusUnavailableError(f"cannot send frame 0x{f.arbitration_id:X} on "
+                                          f"{self.bus.channel_info}: {exc}") from exc
 
     # -- the daemon's frames -------------------------------------------------------------
     def result_frames(self, ref: str | MessageRef, identifier: str, values: Sequence[float],

@@ -36,7 +36,7 @@ from cantools.database.can import Message as CanMessage
 
 from gyrostand.can.dbc import SignalRef, frame_key
 from gyrostand.can.routes import ChannelMap
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import BusUnavailableError, CanEdgeError
 
 __all__ = ["Truth", "FrameSimOptions", "generate_frames", "send_frames", "write_log",
            "BadFrameInjector", "BAD_KINDS"]
@@ -223,8 +223,8 @@ def send_frames(bus: can.BusABC, frames: Iterable[can.Message], realtime: bool =
         try:
             bus.send(f, timeout=timeout)
         except Exception as exc:
-            raise CanEdgeError(f"cannot send simulated frame on {bus.channel_info}: "
-                               f"{exc}") from exc
+            raise BusUnavailableError(f"cannot send simulated frame on {bus.channel_info}: "
+                                      f"{exc}") from exc
         n += 1
     return n
 

@@ -1,9 +1,10 @@
 """Raw frame recorder: every frame as received, lossless, replayable, crash tolerant.
 
-BLF (recommended: compact, fast, keeps CAN FD flags and timestamps) is written by a
-:class:`can.BLFWriter` whose file is a :class:`CommitFile`: nothing reaches the disk until
-:meth:`Recorder.flush`, which compresses the pending log container and appends it with one
-``write`` (after rewriting the header in place). So a process killed at any moment (even
+BLF (recommended: compact, fast, keeps CAN FD flags and timestamps) is written by
+:class:`can.BLFWriter` (python-can's public API only) into a :class:`CommitFile`: nothing
+reaches the disk until :meth:`Recorder.flush`, which stops the writer (python-can's
+``stop`` compresses the pending log container and rewrites the header in place), commits
+with one ``write``, and goes on with a writer that appends (``append=True``). So a process killed at any moment (even
 ``kill -9``) leaves a BLF whose last complete container ends at or after the last flush;
 python-can's own writer, killed, leaves a torn object in ~7 % of cut points, which
 ``can.LogReader`` cannot read past (measured on every prefix of a file). A kill during
@@ -56,7 +57,7 @@ class CommitFile:
 
     def __init__(self, path: str | Path, *, sync_on_close: bool = False) -> None:
         self.name = str(path)
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
         self._committed = 0  # bytes on disk
         self._pending = bytearray()  # bytes after _committed, not yet on disk
         self._patches: list[tuple[int, bytes]] = []  # rewrites inside the committed part
@@ -80,6 +81,25 @@ class CommitFile:
         if not 0 <= self._pos <= end:
             raise ValueError(f"seek to {self._pos} outside [0, {end}]")
         return self._pos
+
+    def read(self, size: int = -1) -> bytes:
+        """Up to ``size`` bytes (all with -1) from the current position, committed or
+        pending (a writer that appends reads the header back); not while rewrites of the
+        committed part are pending."""
+        if self.closed:
+            raise ValueError("read from a closed CommitFile")
+        if self._patches:
+            raise ValueError("read before the pending rewrites are committed")
+        pos, com = self._pos, self._committed
+        end = com + len(self._pending)
+        stop = end if size < 0 else min(end, pos + size)
+        out = b""
+        if pos < com:
+            out += os.pread(self._fd, min(stop, com) - pos, pos)
+        if stop > com:
+            out += bytes(self._pending[max(pos, com) - com:stop - com])
+        self._pos = pos + len(out)
+        return out
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         if self.closed:
@@ -143,13 +163,54 @@ BLF_MARGIN = 86400.0
 BLF_SPAN = 2.0**53 / 1e9
 
 
-class FlushingBLFWriter(can.BLFWriter):
-    """:class:`can.BLFWriter` on a :class:`CommitFile`, with a :meth:`flush` that leaves a
-    complete, readable file on disk (the BLF header, whose start time every object's
-    timestamp is relative to, is committed before the containers that need it).
+class _Segment:
+    """A :class:`CommitFile` as one :class:`can.BLFWriter` sees it: the writer's ``stop``
+    closes it, which commits; the file itself stays open for the next writer."""
 
-    Uses ``BLFWriter._flush`` and ``_write_header`` (python-can 4.x), exactly what
-    ``BLFWriter.stop`` does, without closing; ``tests/can`` checks the result is readable.
+    def __init__(self, file: CommitFile) -> None:
+        self.file = file
+        self.name = file.name
+        self.closed = False
+
+    def seekable(self) -> bool:
+        return True
+
+    def fileno(self) -> int:
+        return self.file.fileno()
+
+    def tell(self) -> int:
+        return self.file.tell()
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self.file.seek(offset, whence)
+
+    def read(self, size: int = -1) -> bytes:
+        return self.file.read(size)
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        return self.file.write(data)
+
+    def flush(self) -> None:
+        self.file.flush()
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self.file.flush()
+
+
+class FlushingBLFWriter(can.Listener):
+    """A BLF log on a :class:`CommitFile`, written by :class:`can.BLFWriter`, with a
+    :meth:`flush` that leaves a complete, readable file on disk (the BLF header, whose
+    start time every object's timestamp is relative to, is committed before the
+    containers that need it).
+
+    python-can's public API only: :meth:`flush` is the writer's ``stop`` (the pending
+    container compressed, the header rewritten in place) on a :class:`_Segment`, whose
+    close commits; writing goes on with a ``can.BLFWriter(..., append=True)`` on the same
+    file, which reads the counts and start time back from the header. The bytes are those
+    one writer would write and stop with; ``tests/can`` checks the result is readable at
+    every flush.
 
     python-can's writer starts the file at its first frame and stores an earlier frame
     with the start's time (an object time is unsigned); it also writes a start before
@@ -160,9 +221,24 @@ class FlushingBLFWriter(can.BLFWriter):
     """
 
     def __init__(self, path: str | Path, *, sync_on_close: bool = False,
-                 **kwargs: object) -> None:
-        file = CommitFile(path, sync_on_close=sync_on_close)
-        super().__init__(file, **kwargs)  # type: ignore[arg-type]
+                 max_container_size: int | None = None) -> None:
+        """``max_container_size``: bytes of uncompressed objects per log container
+        (python-can's option; default python-can's, 128 KiB)."""
+        self.file = CommitFile(path, sync_on_close=sync_on_close)
+        self.max_container_size = max_container_size
+        self._writer = self._blf(append=False)
+
+    def _blf(self, *, append: bool) -> can.BLFWriter:
+        kwargs = ({} if self.max_container_size is None
+                  else {"max_container_size": self.max_container_size})
+        return can.BLFWriter(_Segment(self.file), append=append,  # type: ignore[arg-type]
+                             **kwargs)
+
+    @property
+    def start_timestamp(self) -> float | None:
+        """The file's start (s): object times are stored relative to it; None before the
+        first frame."""
+        return self._writer.start_timestamp
 
     @staticmethod
     def start_for(t: float) -> float:
@@ -179,19 +255,30 @@ class FlushingBLFWriter(can.BLFWriter):
         return start <= t < start + BLF_SPAN
 
     def on_message_received(self, msg: can.Message) -> None:
-        if self.start_timestamp is None and math.isfinite(msg.timestamp):
-            self.start_timestamp = self.start_for(msg.timestamp)
-        super().on_message_received(msg)
+        w = self._writer
+        if w.start_timestamp is None and math.isfinite(msg.timestamp):
+            w.start_timestamp = self.start_for(msg.timestamp)
+        w.on_message_received(msg)
 
     def flush(self) -> None:
+        """Commit: the header in place, then the container(s), one write."""
         if self.file.closed:
             return
-        self._flush()  # compress the pending container into the CommitFile
-        end = self.file.tell()
-        self.file.seek(0)
-        self._write_header(end)
-        self.file.seek(end)
-        self.file.flush()  # commit: header in place, then the container(s), one write
+        if self._writer.start_timestamp is None:  # no frame yet: commit the bare header
+            self.file.flush()  # (a writer appending to it would read a start of 0)
+            return
+        self._writer.stop()  # container + header into the CommitFile, which commits
+        self.file.seek(0)  # the appending writer reads the header where it stands
+        self._writer = self._blf(append=True)
+
+    def stop(self) -> None:
+        """Flush and close the file (fdatasync'ed first with ``sync_on_close``)."""
+        if self.file.closed:
+            return
+        try:
+            self._writer.stop()
+        finally:
+            self.file.close()
 
 
 class Recorder(can.Listener):
@@ -203,8 +290,11 @@ class Recorder(can.Listener):
 
     def __init__(self, path: str | Path, flush_interval: float = 1.0, *,
                  durable: bool = False,
-                 next_path: Callable[[], Path] | None = None) -> None:
+                 next_path: Callable[[], Path] | None = None,
+                 max_container_size: int | None = None) -> None:
         """``durable``: :meth:`stop` fdatasyncs a BLF before closing it (see :meth:`sync`).
+        ``max_container_size``: a BLF's log container size (python-can's option, bytes of
+        uncompressed objects; default python-can's).
         ``next_path()``: the file to continue in when a frame's time does not fit the BLF
         (:meth:`FlushingBLFWriter.fits`; default ``<stem>-<n><suffix>`` beside ``path``);
         the files, in order, replay to the frames received (:attr:`files`)."""
@@ -213,6 +303,7 @@ class Recorder(can.Listener):
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.durable = durable
         self.next_path = next_path
+        self.max_container_size = max_container_size
         self.files = [self.path]
         self.unfaithful = 0
         self._writer = self._open(self.path)
@@ -228,7 +319,8 @@ class Recorder(can.Listener):
     def _open(self, path: Path) -> can.Listener:
         try:
             if path.suffix.lower() == ".blf":
-                return FlushingBLFWriter(path, sync_on_close=self.durable)
+                return FlushingBLFWriter(path, sync_on_close=self.durable,
+                                         max_container_size=self.max_container_size)
             return can.Logger(path)
         except Exception as exc:
             raise CanEdgeError(f"{path}: cannot open frame log: {exc}") from exc

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import errno
 import faulthandler
 import importlib
 import logging
@@ -11,9 +10,9 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
-from .. import __version__
+from .. import __version__, exitcodes
 from ..errors import GyrostandError
 
 #: the subcommands, in ``--help`` order: each is the module of its name here, whose
@@ -24,12 +23,30 @@ COMMANDS = ("init", "run", "replay", "simulate", "demo", "identify", "diagnose",
 DAEMON_COMMANDS = ("run",)
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors exit 64 (``EX_USAGE``), not argparse's 2;
+    the subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        self.exit(exitcodes.USAGE, f"{self.prog}: error: {message}\n")
+
+
+def exit_codes_epilog() -> str:
+    """The exit-status table of ``gyrostand --help``."""
+    rows = [f"  {code:>3}  {meaning}" for code, (_, meaning) in exitcodes.MEANING.items()]
+    return ("exit status (BSD sysexits.h; docs/index.md#exit-status):\n"
+            + "\n".join(rows))
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The command line's parser: every subcommand, or ``only`` that one (what a command
     line naming it parses to is the same; its module alone is imported and built)."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="gyrostand",
         description="CAN-bus field service for gyro thermal test stands.",
+        epilog=exit_codes_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"gyrostand {__version__}")
     _add_global_args(parser, argparse.SUPPRESS)
@@ -90,22 +107,6 @@ def _gather_globals(args: argparse.Namespace) -> None:
     args.verbose, args.debug, args.quiet = verbose, debug, quiet
 
 
-#: what a write that failed says of the machine, not of the input: a fault (exit 1,
-#: systemd restarts the daemon) rather than bad input (exit 2)
-_FAULT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO,
-                           errno.ENOENT, errno.ESTALE})
-
-
-def _is_fault(exc: BaseException) -> bool:
-    """True for an :class:`~gyrostand.errors.OutputError` caused by a full disk, a file
-    too large, an I/O error or a run folder removed while written."""
-    from ..errors import OutputError
-
-    cause = exc.__cause__
-    return (isinstance(exc, OutputError) and isinstance(cause, OSError)
-            and cause.errno in _FAULT_ERRNOS)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; progress output is on for its duration only (an in-process call,
     e.g. from a test or a script, leaves the library silent afterwards)."""
@@ -153,23 +154,29 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         load_entry_points()  # user terms (entry points gyrostand.terms) before any model
         return int(args.func(args) or 0)
-    except GyrostandError as exc:
+    except GyrostandError as exc:  # the status by the error's kind (gyrostand.exitcodes)
         if args.debug:
             raise
         print(f"error: {exc}", file=sys.stderr)
-        return 1 if _is_fault(exc) else 2
+        return exitcodes.exit_status(exc)
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early
         sys.stderr.close()
-        return 0
+        return exitcodes.OK
     except OSError as exc:  # a file or folder the command cannot read or write
         if args.debug:
             raise
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 2
+        return exitcodes.os_error_status(exc)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return exitcodes.INTERRUPTED
+    except Exception as exc:  # a bug: one line, the traceback with --debug
+        if args.debug:
+            raise
+        print(f"error: internal error: {type(exc).__name__}: {exc} (rerun with --debug "
+              "for the traceback, and please report it)", file=sys.stderr)
+        return exitcodes.SOFTWARE
 
 
 if __name__ == "__main__":  # pragma: no cover

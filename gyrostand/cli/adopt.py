@@ -2,7 +2,7 @@
 (the workbench ledger's, each gyro) written into its session file for the daemon's next
 run: a minimal text edit of each gyro's ``model:`` (:mod:`gyrostand.config.edit`), a
 backup beside the file, the unified diff printed, the edited file validated as ``run
---check`` validates it (the backup restored and exit 2 when it fails). A daemon reads its
+--check`` validates it (the backup restored and exit 78 when it fails). A daemon reads its
 session file when a run starts: a running one keeps its model until its run ends."""
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import ConfigError, DataError, GyrostandError
+from .. import exitcodes
+from ..errors import ConfigError, DataError, GyrostandError, NoInputError, SessionFileNotFoundError
 
 if TYPE_CHECKING:
     from ..config import SessionConfig
@@ -119,12 +120,13 @@ def run(args: argparse.Namespace) -> int:
 
     run_dir = Path(args.run)
     if not run_dir.is_dir():
-        raise DataError(f"{run_dir}: not a run folder (adopt writes a run's current model "
-                        "into its session file)")
+        raise NoInputError(f"{run_dir}: not a run folder (adopt writes a run's current model "
+                           "into its session file)")
     info = read_result(run_dir)
     path = Path(args.config or info.get("config") or "")
     if not str(path) or not path.is_file():
-        raise ConfigError(f"{run_dir}: the session file {str(path) or '(none recorded)'} "
+        raise SessionFileNotFoundError(f"{run_dir}: the session file "
+                                       f"{str(path) or '(none recorded)'} "
                           "is not there: give --config FILE")
     try:
         _validated(path)
@@ -165,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
         write_atomic(path, text)
         print(f"error: the edited {path} does not validate as `run --check` does: {exc}; "
               f"restored it (the backup stays: {bak})", file=sys.stderr)
-        return 2
+        return exitcodes.CONFIG
     print(f"wrote {path} (backup: {bak}); valid as `run --check`: "
           + "; ".join(f"gyro {g.name}: model {','.join(g.model)}, identifiers "
                       f"{','.join(g.identifiers)}" for g in cfg.gyros if g.name in new_models))

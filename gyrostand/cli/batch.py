@@ -11,7 +11,7 @@ import time
 from typing import Any
 
 from ..core.names import METHODS
-from ..errors import ConfigError
+from ..errors import UsageError
 from ..plugins import available_terms
 from .common import number
 
@@ -81,11 +81,11 @@ def _steps(text: str) -> tuple[str, ...]:
     steps = [s.strip() for s in text.split(",") if s.strip()]
     bad = [s for s in steps if s not in DO_STEPS]
     if bad or not steps:
-        raise ConfigError(f"--do {text!r}: steps are {', '.join(DO_STEPS)} (got "
-                          f"{', '.join(bad) or 'none'})")
+        raise UsageError(f"--do {text!r}: steps are {', '.join(DO_STEPS)} (got "
+                         f"{', '.join(bad) or 'none'})")
     if not {"identify", "diagnose"} & set(steps):
-        raise ConfigError(f"--do {text!r}: give identify and/or diagnose (a replay alone "
-                          "makes no table)")
+        raise UsageError(f"--do {text!r}: give identify and/or diagnose (a replay alone "
+                         "makes no table)")
     return tuple(s for s in DO_STEPS if s in steps)
 
 
@@ -103,15 +103,15 @@ def run(args: argparse.Namespace) -> int:
     opts = TaskOptions(do=_steps(args.do), model=args.model, method=args.method,
                        identify_options={"sigma": args.sigma} if args.sigma else {})
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers {args.workers}: at least 1")
+        raise UsageError(f"--workers {args.workers}: at least 1")
     specs = collect_runs(args.inputs, config=args.config, manifest=args.manifest)
     attrs = list(dict.fromkeys(k for s in specs for k in s.attrs))
     if args.trend is not None:
         serials = sorted({str(s.attrs["serial"]) for s in specs if s.attrs.get("serial")})
         if args.trend.split("/", 1)[0] not in serials:
             known = ", ".join(serials) or "none: give a manifest with a serial column"
-            raise ConfigError(f"--trend {args.trend}: no run of that serial in the inputs "
-                              f"(serials: {known})")
+            raise UsageError(f"--trend {args.trend}: no run of that serial in the inputs "
+                             f"(serials: {known})")
     tty = sys.stderr.isatty() and not args.quiet
     last = [0.0]
 

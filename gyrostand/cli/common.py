@@ -70,10 +70,10 @@ def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
     extra = dict(getattr(args, "bus_kwargs", None) or [])
     both = sorted(set(options) & set(extra))
     if both:
-        from ..errors import ConfigError
+        from ..errors import UsageError
 
-        raise ConfigError(f"--bus-kwargs: {both[0]} is also given by its own option "
-                          f"(--{both[0].replace('_', '-')}); give it once")
+        raise UsageError(f"--bus-kwargs: {both[0]} is also given by its own option "
+                         f"(--{both[0].replace('_', '-')}); give it once")
     return {**extra, **options}
 
 
@@ -169,7 +169,7 @@ def print_outcome(outcome: RunOutcome, out: TextIO,
 
 def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[str], float]:
     """An argparse ``type``: a finite float (``positive``: > 0; ``nonnegative``: >= 0);
-    anything else is a usage error naming the argument (exit status 2)."""
+    anything else is a usage error naming the argument (exit status 64)."""
     def parse(text: str) -> float:
         try:
             x = float(text)
@@ -184,6 +184,16 @@ def number(*, positive: bool = False, nonnegative: bool = False) -> Callable[[st
         return x
     parse.__name__ = "number"
     return parse
+
+
+def fault_status(outcome: RunOutcome) -> int:
+    """The exit status of a run that ended in ``fault``: the bus lost for good (69), else
+    a write that failed (74: disk full, folder removed)."""
+    from .. import exitcodes
+
+    if outcome.stop_reason.startswith("bus failure"):
+        return exitcodes.UNAVAILABLE
+    return exitcodes.IOERR
 
 
 def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str | None:
@@ -212,7 +222,7 @@ def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str |
 
 def whole(minimum: int = 0) -> Callable[[str], int]:
     """An argparse ``type``: a whole number >= ``minimum``; anything else is a usage error
-    naming the argument (exit status 2)."""
+    naming the argument (exit status 64)."""
     def parse(text: str) -> int:
         try:
             n = int(text)

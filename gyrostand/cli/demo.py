@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import SessionFileNotFoundError, UsageError
 from .common import (
     add_bus_args,
     add_data_format_args,
@@ -35,7 +35,7 @@ def find_demo_config() -> Path:
     for p in CANDIDATES:
         if p.is_file():
             return p
-    raise ConfigError("cannot find configs/demo.yaml (looked in "
+    raise SessionFileNotFoundError("cannot find configs/demo.yaml (looked in "
                       f"{', '.join(str(p) for p in CANDIDATES)}); pass --config")
 
 
@@ -75,8 +75,8 @@ def _run(args: argparse.Namespace) -> int:
     sim = simulate_section(cfg)
     if not args.clean:
         if args.format != "text":
-            raise ConfigError("demo: the loop prints text; use --clean for --format "
-                              f"{args.format}")
+            raise UsageError("demo: the loop prints text; use --clean for --format "
+                             f"{args.format}")
         return loop(cfg, args.out, sys.stdout)
     truths = truth_params(cfg)
     print(f"demo: session {cfg.name!r}, {len(cfg.gyros)} gyro(s) on "

@@ -32,6 +32,7 @@ from typing import Any, TextIO
 
 from ..config import SessionConfig, SimulateConfig
 from ..errors import ConfigError
+from .common import fault_status
 
 #: the demo's hidden effect: a quadratic temperature response of the drift
 #: (``temp2``, γ₂ in drift units per s·degC²: see ``docs/terms.md``), one an engineer meets
@@ -137,7 +138,7 @@ def loop(cfg: SessionConfig, out: str | None, stream: TextIO) -> int:
     first = daemon_run(hidden, out, stream, "run 1")
     print_outcome(first, stream, truth_params(cfg))
     if not first.ok:
-        return 1
+        return fault_status(first)
     run_dir = first.run_dir
     found: dict[str, tuple[str, ...]] = {}
     ok = True

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import UsageError
 
 
 def add_parser(sub: Any) -> None:
@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from ..session.export import export_mf4, export_parquet
 
     if not (args.parquet or args.mf4):
-        raise ConfigError("export: choose a format: --parquet and/or --mf4")
+        raise UsageError("export: choose a format: --parquet and/or --mf4")
     written = []
     if args.parquet:
         written += export_parquet(args.run, args.out, args.gyro)

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..core import registry
 from ..core.names import LKF_VARIANTS, METHODS
-from ..errors import ConfigError
+from ..errors import UsageError
 from ..plugins import available_terms
 from .common import add_format_args, emit, number
 from .workbench_args import add_subject_args, subject_of, subjects_of
@@ -69,8 +69,8 @@ def run(args: argparse.Namespace) -> int:
         from ..core.ml.joint import joint_ml
 
         if args.method != "ml":
-            raise ConfigError(f"several runs are identified jointly by ml only (--method "
-                              f"{args.method} fits one run)")
+            raise UsageError(f"several runs are identified jointly by ml only (--method "
+                             f"{args.method} fits one run)")
         subjects = subjects_of(args)
         emit(joint_ml([s.samples for s in subjects], subjects[0].model, sigma=args.sigma),
              args.format)
@@ -81,8 +81,8 @@ def run(args: argparse.Namespace) -> int:
     opts = options_for(args)
     beta0 = getattr(opts, "beta0", None)  # a linearisation point (lkf)
     if beta0 is not None and beta0 * samples.dt >= 1.0:
-        raise ConfigError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
-                          f"{1.0 / samples.dt:g} of {args.run}")
+        raise UsageError(f"--beta0 {beta0:g} 1/s must be below 1/dt = "
+                         f"{1.0 / samples.dt:g} of {args.run}")
     result = registry.get(args.method).fit(samples, subject.model, opts)
     if subject.unit != result.unit:
         result = dataclasses.replace(result, unit=subject.unit)

@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import ConfigError
+from ..errors import UsageError
 from .common import add_bus_args, bus_overrides
 
 if TYPE_CHECKING:
@@ -49,9 +49,9 @@ def run(args: argparse.Namespace) -> int:
 
     bus = bus_overrides(args)
     if bus and "interface" not in bus:
-        raise ConfigError("init: give -i/--interface with the other bus options (or none "
-                          "of them: socketcan can0 is written where this machine has it, "
-                          "else the virtual bus)")
+        raise UsageError("init: give -i/--interface with the other bus options (or none "
+                         "of them: socketcan can0 is written where this machine has it, "
+                         "else the virtual bus)")
     out = Path(args.output)
     sc = scaffold(args.dbc, out, bus=bus or None, name=args.name, id_base=args.id_base,
                   listen_only=args.listen_only)

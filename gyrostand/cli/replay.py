@@ -12,11 +12,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..errors import CanEdgeError
+from .. import exitcodes
+from ..errors import NoInputError
 from .common import (
     add_data_format_args,
     add_format_args,
     decoded_nothing,
+    fault_status,
     number,
     print_outcome,
     with_data_formats,
@@ -72,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         if p.is_dir():
             segs = raw_segments(p)
             if not segs:
-                raise CanEdgeError(f"{p}: no raw log (raw.blf) in this folder")
+                raise NoInputError(f"{p}: no raw log (raw.blf) in this folder")
             groups.append(list(segs))
         else:
             groups.append([p])
@@ -99,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
     for why in empty:  # bad input: the logs hold nothing of this session's messages
         print(f"error: {why}", file=sys.stderr)
     if empty:
-        return 2
+        return exitcodes.DATAERR
     faults = [o for o in outcomes if not o.ok]
     for o in faults:  # e.g. the disk filled: a fault, named with its folder
         print(f"error: {o.run_dir}: {o.stop_reason}", file=sys.stderr)
-    return 1 if faults else 0
+    return fault_status(faults[0]) if faults else exitcodes.OK

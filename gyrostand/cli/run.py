@@ -7,11 +7,13 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
+from .. import exitcodes
 from .common import (
     add_bus_args,
     add_data_format_args,
     add_format_args,
     decoded_nothing,
+    fault_status,
     number,
     print_outcome,
     progress,
@@ -63,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = with_data_formats(with_bus_overrides(load_config(args.config), args), args)
     if args.check:
         print(describe_session(cfg))
-        return 0
+        return exitcodes.OK
 
     def ready(run_dir) -> None:
         print(f"ready: {run_dir}", file=progress(args), flush=True)
@@ -75,10 +77,11 @@ def run(args: argparse.Namespace) -> int:
                        on_ready=ready, resume=args.resume, on_waiting=waiting)
     print_outcome(outcome, sys.stdout, format=args.format)
     empty = decoded_nothing(outcome, cfg, "run")
-    if empty is not None:  # frames none of which fit the session: bad input; none: a fault
+    if empty is not None:  # frames none of which fit the session: bad input; none: no bus
         print(f"error: {empty}", file=sys.stderr)
-        return 2 if outcome.stats["decoder"].get("received") else 1
-    return 0 if outcome.ok else 1
+        return (exitcodes.DATAERR if outcome.stats["decoder"].get("received")
+                else exitcodes.UNAVAILABLE)
+    return exitcodes.OK if outcome.ok else fault_status(outcome)
 
 
 def describe_session(cfg: SessionConfig) -> str:

@@ -11,7 +11,7 @@ import logging
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import ConfigError, UsageError
 from .common import add_bus_args, number, with_bus_overrides
 
 log = logging.getLogger(__name__)
@@ -53,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     path = args.log
     if args.out_deprecated is not None:
         if path is not None:
-            raise ConfigError("simulate: give --log LOG (--out is its deprecated spelling), "
-                              "not both")
+            raise UsageError("simulate: give --log LOG (--out is its deprecated spelling), "
+                             "not both")
         log.warning("simulate --out LOG is deprecated: use --log LOG (--out is a folder "
                     "in every other command)")
         path = args.out_deprecated

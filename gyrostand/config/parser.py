@@ -12,7 +12,7 @@ import yaml
 
 from gyrostand.can.dbc import MessageRef, load_dbc
 from gyrostand.can.units import DEFAULT_DRIFT_UNIT, UnitError, rate_conversion
-from gyrostand.errors import CanEdgeError, ConfigError
+from gyrostand.errors import CanEdgeError, ConfigError, SessionFileNotFoundError
 from gyrostand.runfolder.layout import DATA_FORMATS
 
 from .gyros import GyroSections
@@ -43,7 +43,8 @@ def load_config(path: str | Path) -> SessionConfig:
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
+        raise SessionFileNotFoundError(f"{path}: cannot read config: {exc.strerror or exc}"
+                                       ) from exc
     return parse_text(decode_text(raw, path), path)
 
 

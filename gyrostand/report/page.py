@@ -31,6 +31,7 @@ from matplotlib.figure import Figure
 from .. import __version__, progress
 from ..core.diagnose.results import DiagnoseResult
 from ..core.model import context
+from ..errors import OutputError
 from ..runfolder import write_atomic
 from ..workbench import Subject, run_diagnose
 from ..workbench.advice import adopt_command, subject_command
@@ -77,7 +78,11 @@ def write_report(subject: Subject, out_dir: str | Path | None = None, *,
     if format != "html" and format not in DOCUMENTS:
         raise ValueError(f"unknown report format {format!r}")
     out = Path(out_dir) if out_dir is not None else default_dir(subject)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file where the folder goes, no permission
+        raise OutputError(f"{out}: cannot create the report folder: "
+                          f"{exc.strerror or exc}") from exc
     rep = (report if report is not None
            else run_diagnose(subject, record=False, command="report"))
     with progress.stage("report", "Allan tables"):

@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..errors import DataError
+from ..errors import DataError, NoInputError
 from .files import read_text, write_atomic
 from .layout import RESULT, RUN_LOG, SEGMENTS_FILE
 
@@ -58,7 +58,7 @@ def read_result(run_dir: str | Path) -> dict[str, Any]:
     folder has none (not a run folder)."""
     path = Path(run_dir) / RESULT
     if not path.is_file():
-        raise DataError(f"{run_dir}: not a run folder (no result.json)")
+        raise NoInputError(f"{run_dir}: not a run folder (no result.json)")
     try:
         info = json.loads(read_text(path))
     except json.JSONDecodeError as exc:

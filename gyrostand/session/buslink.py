@@ -21,7 +21,7 @@ import can
 
 from ..can.bus import open_bus
 from ..config import ReconnectConfig, SessionConfig
-from ..errors import CanEdgeError
+from ..errors import BusUnavailableError, CanEdgeError
 from .responses import BusSink
 
 __all__ = ["BusLink", "NotifierWatch", "Backoff", "StopSignals", "STOP_SIGNALS",
@@ -236,8 +236,8 @@ def open_bus_at_start(cfg: SessionConfig, stop: threading.Event | None = None,
                     raise
                 if backoff.expired(now) or stopping.is_set():
                     why = "stopped" if stopping.is_set() else "giving up"
-                    raise CanEdgeError(f"{exc} ({why} after {waited:.1f} s and {attempts} "
-                                       f"attempts, reconnect.at_start {rc.at_start:g} s)"
+                    raise BusUnavailableError(f"{exc} ({why} after {waited:.1f} s and {attempts} "
+                                              f"attempts, reconnect.at_start {rc.at_start:g} s)"
                                        ) from exc.__cause__
                 if attempts == 1:
                     log.warning("%s; waiting for the bus, up to %g s (reconnect.at_start)",

@@ -6,7 +6,9 @@ Both carry the same data as the CSVs, values unchanged (float64; counts as integ
 * **Parquet**: ``<out>/<gyro>/samples.parquet`` (``t, drift, temp, n_drift, n_temp``) and
   ``<out>/<gyro>/estimates.parquet`` (``t``, ``<id>:<param>``, ``<id>:<param>:std`` and
   ``<id>:status`` as a dictionary-encoded string); each field's ``unit`` and the table's
-  ``gyro``, ``run``, ``source`` in the schema metadata.
+  ``gyro``, ``run``, ``source`` in the schema metadata, and the same as pandas' attrs
+  (schema key ``PANDAS_ATTRS``, pandas >= 2.1), so ``pd.read_parquet(p).attrs["units"]``
+  maps each column to its unit (field metadata alone, pandas drops).
 * **MDF4** (4.10): ``<out>/<run folder name>.mf4``, per gyro one channel group of samples
   (``<gyro>.drift``, ``<gyro>.temp``, ``<gyro>.n_drift``, ``<gyro>.n_temp``) and one of
   online estimates (``<gyro>.<id>.<param>``, ``...std``, ``<gyro>.<id>.status`` with a
@@ -26,6 +28,7 @@ clear error naming the extra.
 from __future__ import annotations
 
 import datetime as dt
+import json
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,7 +40,7 @@ import numpy as np
 from ..can.bus import STATUS_CODES
 from ..core.model import Model
 from ..core.summary import unit_text
-from ..errors import DataError, GyrostandError, OutputError
+from ..errors import DataError, GyrostandError, MissingPackageError, OutputError
 from ..runfolder import (
     SAMPLES_COLUMNS,
     estimates_path,
@@ -48,12 +51,16 @@ from ..runfolder import (
 )
 
 __all__ = ["ExportError", "RunTables", "read_run_tables", "export_parquet", "export_mf4",
-           "write_formats"]
+           "write_formats", "PANDAS_ATTRS"]
+
+#: the schema metadata key pandas (>= 2.1) writes ``DataFrame.attrs`` under and
+#: ``pd.read_parquet`` restores them from (``pyarrow``'s ``to_pandas()`` does not read it)
+PANDAS_ATTRS = "PANDAS_ATTRS"
 
 log = logging.getLogger(__name__)
 
 
-class ExportError(GyrostandError, ImportError):
+class ExportError(MissingPackageError):
     """An export format whose optional package is not installed."""
 
 
@@ -157,6 +164,9 @@ def export_parquet(run_dir: str | Path, out: str | Path | None = None,
                                        metadata={"unit": tab.units.get(name, "")}))
             meta = {"gyro": tab.gyro, "run": run_dir.name, "source": str(info.get("source")),
                     "table": kind}
+            units = {name: tab.units.get(name, "") for name in cols}
+            # pandas' own key: pd.read_parquet restores it as DataFrame.attrs (pandas >= 2.1)
+            meta[PANDAS_ATTRS] = json.dumps({**meta, "units": units}, ensure_ascii=False)
             table = pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta))
             path = out / tab.gyro / f"{kind}.parquet"
             try:

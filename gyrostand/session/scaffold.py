@@ -46,7 +46,7 @@ from gyrostand.can.units import (
     temperature_conversion,
 )
 from gyrostand.can.validity import is_code_name, status_signals
-from gyrostand.errors import ConfigError
+from gyrostand.errors import ConfigError, OutputError
 
 __all__ = ["OWN_DBC", "Scaffold", "scaffold", "write_scaffold", "default_bus",
            "try_it_command"]
@@ -398,7 +398,7 @@ def write_scaffold(sc: Scaffold, out: str | Path, *, force: bool = False) -> lis
     paths = [out] + ([sc.dbc_path] if sc.merged_dbc is not None else [])
     for p in paths:
         if p.exists() and not force:
-            raise ConfigError(f"{p}: exists; pass --force to overwrite")
+            raise OutputError(f"{p}: exists; pass --force to overwrite")
     out.parent.mkdir(parents=True, exist_ok=True)
     if sc.merged_dbc is not None:
         dump_dbc(sc.merged_dbc, sc.dbc_path, sc.encoding)

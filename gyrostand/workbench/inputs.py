@@ -31,7 +31,13 @@ from typing import Any
 
 from ..core.data import Samples
 from ..core.summary import DRIFT_UNIT
-from ..errors import ConfigError, DataError, GyrostandError
+from ..errors import (
+    DataError,
+    GyrostandError,
+    MissingPackageError,
+    NoInputError,
+    UsageError,
+)
 from ..runfolder import LEDGER, RESULT, csv_ledger_path, read_result, samples_path
 
 __all__ = ["Input", "read_input", "input_kind", "RAW_LOG_SUFFIXES", "DEFAULT_MODEL"]
@@ -101,13 +107,13 @@ def read_input(path: str | Path, *, gyro: str | None = None, dt: float | None = 
     kind = input_kind(path)
     if kind == "missing":
         if path.exists():  # a FIFO, a socket, a device: reading it could block for ever
-            raise DataError(f"{path}: not a regular file or a run folder (a pipe or a "
-                            "device): give a run folder, a CSV, a Parquet export or a log")
-        raise DataError(f"{path}: no such run folder or file")
+            raise NoInputError(f"{path}: not a regular file or a run folder (a pipe or a "
+                               "device): give a run folder, a CSV, a Parquet export or a log")
+        raise NoInputError(f"{path}: no such run folder or file")
     if config is not None and kind != "log":
-        raise ConfigError(f"--config {config}: only a raw CAN log needs a session file "
-                          f"({path} is a {'run folder' if kind == 'run' else kind + ' file'},"
-                          " which names its own units)")
+        raise UsageError(f"--config {config}: only a raw CAN log needs a session file "
+                         f"({path} is a {'run folder' if kind == 'run' else kind + ' file'},"
+                         " which names its own units)")
     if kind == "run":
         return _run_input(path, gyro)
     if kind == "log":
@@ -181,9 +187,9 @@ def _run_input(path: Path, gyro: str | None) -> Input:
 
 def _log_input(path: Path, gyro: str | None, config: str | Path | None) -> Input:
     if config is None:
-        raise ConfigError(f"{path}: a raw CAN log is read through the session file that "
-                          "decodes it: give --config SESSION.yaml (its DBC mapping, gyros "
-                          "and sampling; e.g. the one the run was recorded with)")
+        raise UsageError(f"{path}: a raw CAN log is read through the session file that "
+                         "decodes it: give --config SESSION.yaml (its DBC mapping, gyros "
+                         "and sampling; e.g. the one the run was recorded with)")
     from ..config import load_config
     from ..core.model import Model
     from ..session.offline import log_samples
@@ -205,8 +211,8 @@ def _parquet_input(path: Path, gyro: str | None, dt: float | None) -> Input:
     try:
         import pyarrow.parquet as pq
     except ImportError:
-        raise ConfigError(f"{path}: reading Parquet needs the pyarrow package: pip install "
-                          "'gyrostand[formats]'") from None
+        raise MissingPackageError(f"{path}: reading Parquet needs the pyarrow package: pip install "
+                                  "'gyrostand[formats]'") from None
     try:
         table = pq.read_table(path)
     except Exception as exc:  # pyarrow's ArrowInvalid, OSError: not a Parquet file

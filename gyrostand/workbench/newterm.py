@@ -24,7 +24,7 @@ from pathlib import Path
 from ..core.diagnose.formula import SUPPORTED, Formula, sparse_formula
 from ..core.diagnose.reference import Partial, reference_fit
 from ..core.ml.fit import ml
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, OutputError
 from ..plugins import known_terms
 from .subject import Subject
 
@@ -133,7 +133,7 @@ def new_term(subject: Subject, name: str, out: Path | None = None,
     folder = Path(out) if out is not None else _default_folder(subject, name)
     module = folder / f"gyrostand_{name}.py"
     if module.exists() and not force:
-        raise ConfigError(f"{module} exists (--force to overwrite)")
+        raise OutputError(f"{module} exists (--force to overwrite)")
     folder.mkdir(parents=True, exist_ok=True)
     module.write_text(term_source(name, f, q, subject.samples.source, subject.unit),
                       encoding="utf-8")

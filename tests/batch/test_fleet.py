@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.batch import fleet
 from gyrostand.batch.inputs import collect_runs
 from gyrostand.batch.table import write_table
@@ -131,18 +132,19 @@ def test_without_dask_the_error_names_the_extra(monkeypatch, capsys):
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "distributed" else real(name, *a))
-    assert main(["batch", "x.blf", "--out", "o"]) == 2
+    assert main(["batch", "x.blf", "--out", "o"]) == exitcodes.UNAVAILABLE
     assert "pip install 'gyrostand[fleet]'" in capsys.readouterr().err
 
 
 def test_bad_steps_and_models_are_usage_errors_before_any_work(capsys, tmp_path):
-    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "fit"]) == 2
+    out = str(tmp_path / "o")
+    assert main(["batch", str(tmp_path), "--out", out, "--do", "fit"]) == exitcodes.USAGE
     assert "--do 'fit': steps are replay, identify, diagnose (got fit)" in \
         capsys.readouterr().err
-    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--do", "replay"]) == 2
+    assert main(["batch", str(tmp_path), "--out", out, "--do", "replay"]) == exitcodes.USAGE
     assert "give identify and/or diagnose" in capsys.readouterr().err
     assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--model",
-                 "markov,nosuchterm"]) == 2
+                 "markov,nosuchterm"]) == exitcodes.USAGE
     assert "nosuchterm" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
@@ -197,7 +199,7 @@ def test_trend_of_an_unknown_serial_is_a_usage_error_before_any_work(capsys, tmp
     m = tmp_path / "m.csv"
     m.write_text("path,config,serial,date\na.blf,s.yaml,S1,2026-01-01\n")
     assert main(["batch", "--manifest", str(m), "--out", str(tmp_path / "o"),
-                 "--trend", "S7"]) == 2
+                 "--trend", "S7"]) == exitcodes.USAGE
     assert "--trend S7: no run of that serial in the inputs (serials: S1)" in \
         capsys.readouterr().err
     assert not (tmp_path / "o").exists()

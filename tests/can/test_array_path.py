@@ -265,8 +265,7 @@ def _log(cfg, path, frames, container=None):
     if container is None:
         write_log(path, frames)
     else:
-        with Recorder(path) as rec:
-            rec._writer.max_container_size = container
+        with Recorder(path, max_container_size=container) as rec:
             for f in frames:
                 rec.on_message_received(f)
     return path

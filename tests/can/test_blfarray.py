@@ -95,8 +95,7 @@ def test_session_logs_match_python_can(tmp_path, demo_cfg, triad_cfg, foreign_cf
                                 [smooth_truth(30)],
                                 FrameSimOptions(drift_rate=20, temperature_rate=5,
                                                 jitter=0.002, seed=5)))
-    with Recorder(tmp_path / "demo.blf") as rec:
-        rec._writer.max_container_size = 2048
+    with Recorder(tmp_path / "demo.blf", max_container_size=2048) as rec:
         for f in demo:
             rec.on_message_received(f)
     paths = [tmp_path / "demo.blf"]

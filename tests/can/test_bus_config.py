@@ -12,6 +12,7 @@ import pytest
 import yaml
 from canhelpers import DATA
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.config import load_config
 
@@ -70,7 +71,7 @@ def test_bus_may_be_empty_and_an_interface_found_nowhere_is_bad_input(tmp_path, 
     path = _session(tmp_path, {})
     cfg = load_config(path)  # `bus: {}` is accepted
     assert dict(cfg.bus) == {}
-    assert main(["run", str(path), "--check"]) == 2
+    assert main(["run", str(path), "--check"]) == exitcodes.CONFIG
     err = capsys.readouterr().err
     assert err.startswith(f"error: {path}: bus.interface: not given: set it in the session "
                           f"file's bus:, with -i/--interface, or in python-can's config")
@@ -90,14 +91,15 @@ def test_bad_bus_arguments_are_usage_errors(tmp_path, home, capsys):
     path = _session(tmp_path, {})
     with pytest.raises(SystemExit) as exc:
         main(["run", str(path), "--check", "--bus-kwargs", "no-equals-sign"])
-    assert exc.value.code == 2
+    assert exc.value.code == exitcodes.USAGE
     assert ("argument --bus-kwargs: expected KEY=VALUE (a python-can bus argument), got "
             "'no-equals-sign'") in capsys.readouterr().err
-    assert main(["run", str(path), "--check", "-c", "a", "--bus-kwargs", "channel=b"]) == 2
+    assert main(["run", str(path), "--check", "-c", "a", "--bus-kwargs", "channel=b"]) == \
+        exitcodes.USAGE
     assert "error: --bus-kwargs: channel is also given by its own option (--channel)" in \
         capsys.readouterr().err
     bad = _session(tmp_path, [])
-    assert main(["run", str(bad), "--check"]) == 2
+    assert main(["run", str(bad), "--check"]) == exitcodes.CONFIG
     assert "bus: expected a mapping of can.Bus arguments, got list" in capsys.readouterr().err
 
 

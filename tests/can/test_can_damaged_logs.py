@@ -35,8 +35,7 @@ def _key(m: can.Message):
 
 
 def _blf(path, frames=FRAMES, container=2048):
-    with Recorder(path) as rec:
-        rec._writer.max_container_size = container  # many containers, as a long run has
+    with Recorder(path, max_container_size=container) as rec:  # many containers, as a long run has
         for f in frames:
             rec.on_message_received(f)
     return path.read_bytes()

@@ -180,8 +180,7 @@ def test_reader_process_reports_errors_with_the_file(demo_cfg, tmp_path, caplog)
         list(ReaderProcess([tmp_path / "nope.blf"]))
     path = tmp_path / "sim.blf"
     frames = _sim(demo_cfg, n=30)
-    with Recorder(path) as rec:
-        rec._writer.max_container_size = 2048  # many objects, as a long recording has
+    with Recorder(path, max_container_size=2048) as rec:  # many objects, as a long run has
         for f in frames:
             rec.on_message_received(f)
     whole = path.read_bytes()

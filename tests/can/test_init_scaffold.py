@@ -11,6 +11,7 @@ import cantools
 import pytest
 from canhelpers import DATA, ROOT
 
+from gyrostand import exitcodes
 from gyrostand.can.survey import unit_kind
 from gyrostand.cli import main
 from gyrostand.config import GyroConfig, load_config
@@ -90,7 +91,7 @@ def test_can_fd_imu_in_rad_per_s_and_kelvin(tmp_path):
 
 def test_j1939_fog_with_a_clashing_id_needs_an_id_range(tmp_path, capsys):
     dbc = DATA / "fog1a_j1939.dbc"
-    assert main(["init", str(dbc), "-o", str(tmp_path / "a.yaml")]) == 2
+    assert main(["init", str(dbc), "-o", str(tmp_path / "a.yaml")]) == exitcodes.CONFIG
     err = capsys.readouterr().err
     assert "GS_RESULT_1 would take standard id 0x300, which is ECU_DIAG" in err
     assert "--id-base" in err and not (tmp_path / "a.yaml").exists()
@@ -113,12 +114,12 @@ def test_listen_only_and_refusals(tmp_path, capsys):
     assert all(g.result is None for g in cfg.gyros)
     assert cfg.dbc_path == (DATA / "foreign.dbc").resolve()
     capsys.readouterr()
-    assert main(["init", str(DATA / "foreign.dbc"), "-o", str(out)]) == 2
+    assert main(["init", str(DATA / "foreign.dbc"), "-o", str(out)]) == exitcodes.CANTCREAT
     assert "exists; pass --force" in capsys.readouterr().err
     nogyro = tmp_path / "body.dbc"
     nogyro.write_text('VERSION ""\n\nNS_ :\n\nBS_:\n\nBU_: ECU\n\n'
                       'BO_ 291 SPEED: 8 ECU\n SG_ Speed : 0|16@1+ (0.01,0) [0|300] "km/h" ECU\n')
-    assert main(["init", str(nogyro), "-o", str(tmp_path / "b.yaml")]) == 2
+    assert main(["init", str(nogyro), "-o", str(tmp_path / "b.yaml")]) == exitcodes.CONFIG
     assert "no signal looks like a gyro drift rate" in capsys.readouterr().err
 
 
@@ -128,7 +129,7 @@ def test_run_check_does_not_open_the_bus_and_names_errors(tmp_path, capsys):
     assert main(["run", str(out), "--check"]) == 0  # nothing listens on port 9
     assert "    interface = 'remote'  (session file)\n" in capsys.readouterr().out
     out.write_text(out.read_text().replace("signal: YRate,", "signal: YRat,"))
-    assert main(["run", str(out), "--check"]) == 2
+    assert main(["run", str(out), "--check"]) == exitcodes.CONFIG
     assert "gyros[1].drift.signal: 'YRat' is not a signal of message IMU_Y_RATE" in \
         capsys.readouterr().err
 

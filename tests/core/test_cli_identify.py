@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import paper_profile
@@ -73,7 +74,7 @@ def test_bad_input_exits_nonzero_with_error_line(tmp_path):
     bad.write_text("t,drift\n0,1\n")
     proc = subprocess.run([sys.executable, "-m", "gyrostand", "identify", str(bad)],
                           capture_output=True, text=True)
-    assert proc.returncode == 2
+    assert proc.returncode == exitcodes.DATAERR
     assert proc.stderr.startswith("error: ") and "missing column(s) temp" in proc.stderr
     assert "Traceback" not in proc.stderr
 
@@ -82,7 +83,7 @@ def test_lsq_refusal_via_cli(csv_path):
     proc = subprocess.run([sys.executable, "-m", "gyrostand", "identify", str(csv_path),
                            "--method", "lsq", "--model", "markov,temp,random_walk"],
                           capture_output=True, text=True)
-    assert proc.returncode == 2
+    assert proc.returncode == exitcodes.USAGE
     assert "lsq cannot represent a sum of random processes" in proc.stderr
 
 

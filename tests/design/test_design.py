@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.core.design.search import (
     ChamberLimits,
     case_temperature,
@@ -124,7 +125,8 @@ def test_bad_param_is_an_error_naming_it(tmp_path):
     p = subprocess.run([sys.executable, "-m", "gyrostand", "design", "--model", "markov,temp",
                         "--param", "temp.gamma", "--out", str(tmp_path)],
                        capture_output=True, text=True, timeout=120)
-    assert p.returncode == 2 and "--param 'temp.gamma': expected NAME=VALUE" in p.stderr
+    assert p.returncode == exitcodes.USAGE
+    assert "--param 'temp.gamma': expected NAME=VALUE" in p.stderr
 
 
 @pytest.mark.slow

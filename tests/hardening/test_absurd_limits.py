@@ -1,7 +1,7 @@
 """Absurd limits are refused, not computed (issue 28, finding 11), through the command
-line: ``design --t-min=-1e308 --t-max=1e308`` is exit 2 naming the option (before:
+line: ``design --t-min=-1e308 --t-max=1e308`` is exit 64 naming the option (before:
 ``time_s=inf``, every std inf, exit 0); a simulated temperature profile beyond the DBC
-signal's range is exit 2 naming the breakpoint (before: a 200 °C profile saturated at
+signal's range is exit 78 naming the breakpoint (before: a 200 °C profile saturated at
 150 °C without a word), and any value the simulator must saturate is logged."""
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 from .procs import write_config
@@ -26,8 +27,8 @@ MODEL = ["--model", "markov,temp", "--param", "markov.beta=0.03", "--param",
     (["--start=90"], "--start 90 is outside --t-min .. --t-max (0 .. 50 °C)"),
     (["--legs=0"], "--legs 0: expected 1 .. 1000"),
 ])
-def test_design_with_absurd_limits_is_exit_2(tmp_path, capsys, args, msg):
-    assert cli_main(["design", *MODEL, *args, "--out", str(tmp_path)]) == 2
+def test_design_with_absurd_limits_is_exit_64(tmp_path, capsys, args, msg):
+    assert cli_main(["design", *MODEL, *args, "--out", str(tmp_path)]) == exitcodes.USAGE
     err = capsys.readouterr().err
     assert err.startswith(f"error: {msg}") and err.count("\n") == 1, err
     assert not any(tmp_path.iterdir())
@@ -36,7 +37,7 @@ def test_design_with_absurd_limits_is_exit_2(tmp_path, capsys, args, msg):
 def test_a_profile_beyond_the_dbc_range_is_refused(tmp_path, capsys):
     cfg = write_config(tmp_path / "hot.yaml", tmp_path / "runs", {"interface": "virtual"},
                        sim={"temperature": [[0, 20], [100, 200], [200, 30]]})
-    assert cli_main(["run", str(cfg), "--check"]) == 2
+    assert cli_main(["run", str(cfg), "--check"]) == exitcodes.CONFIG
     assert ("simulate.temperature[1]: 200 degC is outside the range of "
             "GYRO_TEMP_1.Temperature (-60 .. 150 degC)") in capsys.readouterr().err
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import can
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.config import load_config
 from gyrostand.session.offline import run_replay, simulated_frames
@@ -198,7 +199,7 @@ def test_start_without_a_bus_gives_up_after_at_start_and_at_once_when_hopeless(t
         reconnect={"at_start": 1.5, "first_delay": 0.1, "max_delay": 0.4})
     t0 = time.monotonic()
     rc, err = Daemon(cfg_path, "--out", str(tmp_path / "runs")).finish(60)
-    assert rc == 2 and time.monotonic() - t0 >= 1.5
+    assert rc == exitcodes.UNAVAILABLE and time.monotonic() - t0 >= 1.5
     assert "cannot open CAN bus (interface='remote'" in err
     assert re.search(r"giving up after 1\.\d s and \d+ attempts, reconnect\.at_start 1\.5 s",
                      err), err
@@ -209,5 +210,5 @@ def test_start_without_a_bus_gives_up_after_at_start_and_at_once_when_hopeless(t
         reconnect={"at_start": 60})
     t0 = time.monotonic()
     rc, err = Daemon(cfg_path, "--out", str(tmp_path / "runs")).finish(60)
-    assert rc == 2 and time.monotonic() - t0 < 20
+    assert rc == exitcodes.CONFIG and time.monotonic() - t0 < 20
     assert "Unknown interface type" in err and "waiting" not in err

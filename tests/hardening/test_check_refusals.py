@@ -11,6 +11,7 @@ import can
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.receive.listener import DecodingListener
 from gyrostand.can.routes import ChannelMap
@@ -36,7 +37,7 @@ def test_counter_is_the_channels_own_signal(tmp_path, capsys):
     def edit(d):
         d["gyros"][0]["drift"]["counter"] = "Drift"
     rc, out = _check(tmp_path, capsys, edit)
-    assert rc == 2
+    assert rc == exitcodes.CONFIG
     assert "gyros[0].drift.counter: Drift is the channel's own signal" in out.err
 
 
@@ -48,7 +49,7 @@ def test_two_gyros_in_one_result_frame(tmp_path, capsys):
         g2["result"] = {"message": "GS_RESULT_1"}
         d["gyros"].append(g2)
     rc, out = _check(tmp_path, capsys, edit)
-    assert rc == 2
+    assert rc == exitcodes.CONFIG
     assert "gyros[1].result.message: GS_RESULT_1 is already gyros[0].result.message" \
         in out.err
 
@@ -58,7 +59,7 @@ def test_a_drift_signal_of_scale_zero(tmp_path, capsys):
         ' SG_ Drift : 0|32@1- (1E-005,0) [-1000|1000] "deg/h"',
         ' SG_ Drift : 0|32@1- (0,0) [-1000|1000] "deg/h"')
     rc, out = _check(tmp_path, capsys, lambda d: None, text)
-    assert rc == 2
+    assert rc == exitcodes.CONFIG
     assert "gyros[0].drift.signal: GYRO_DRIFT_1.Drift has scale 0 in the DBC" in out.err
 
 
@@ -82,7 +83,7 @@ def test_fit_with_a_term_twice_is_refused(tmp_path, capsys):
                        "--remove bias is given 2 times"),
                       (["--add", "temp", "--remove", "temp"],
                        "temp is both added (--add) and removed (--remove)")):
-        assert cli_main(["fit", str(csv), *argv]) == 2
+        assert cli_main(["fit", str(csv), *argv]) == exitcodes.USAGE
         assert f"error: {msg}" in capsys.readouterr().err
 
 

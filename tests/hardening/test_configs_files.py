@@ -24,6 +24,7 @@ import can
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.replay import read_log
 from gyrostand.cli import main as cli_main
 from gyrostand.config import load_config
@@ -168,7 +169,7 @@ def test_read_only_output_folder_names_the_path(tmp_path, mounts):
     cfg = _write(tmp_path, "ro", _set(_demo(tmp_path), "session.output", str(ro / "runs")))
     r = subprocess.run([sys.executable, "-m", "gyrostand", "run", str(cfg), "--duration",
                         "1"], capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert r.returncode == 2 and r.stderr.startswith("error: "), r.stderr
+    assert r.returncode == exitcodes.CANTCREAT and r.stderr.startswith("error: "), r.stderr
     assert str(ro / "runs") in r.stderr and "Read-only file system" in r.stderr
 
 
@@ -222,7 +223,7 @@ def test_full_disk_stops_cleanly_naming_the_file_and_keeps_what_was_written(tmp_
         if stand is not None:
             stand.shutdown()
         srv.stop()
-    assert rc == 1, (rc, err, daemon.out)
+    assert rc == exitcodes.IOERR, (rc, err, daemon.out)
     stopped = next(ln for ln in daemon.out if ln.startswith("stopped: "))
     assert expect in stopped and "state fault" in stopped, stopped
     assert str(run_dir) in stopped  # the message names the file that failed

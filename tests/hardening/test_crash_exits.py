@@ -1,5 +1,6 @@
 """Crashes of the third hostile round (issue 28, "Crashes"), through the command line's
-main entry: each is one clear ``error: ...`` line naming the problem and exit status 2
+main entry: each is one clear ``error: ...`` line naming the problem and an exit status
+by its kind (64 usage, 65 data, 66 input)
 (before: a traceback from ValueError, scipy's _MaxFuncCallError, numpy's
 _ArrayMemoryError after trying to allocate 26.8 GiB, and pathlib's RuntimeError)."""
 
@@ -9,6 +10,7 @@ import random
 
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 MODEL = ["--model", "markov,temp", "--param", "markov.beta=0.03", "--param",
@@ -32,7 +34,7 @@ def _series(path, n):
 @pytest.mark.parametrize("n", [8, 12, 15])
 def test_allan_on_fewer_than_16_samples(tmp_path, capsys, n):
     csv = _series(tmp_path / "short.csv", n)
-    assert _rc(["allan", str(csv)]) == 2
+    assert _rc(["allan", str(csv)]) == exitcodes.DATAERR
     assert capsys.readouterr().err == (f"error: {csv}: an Allan table needs at least 16 "
                                        f"samples of drift, got {n}\n")
 
@@ -44,7 +46,7 @@ def test_allan_on_16_samples_works(tmp_path, capsys):
 
 
 def test_design_with_zero_evaluations_is_a_usage_error(tmp_path, capsys):
-    assert _rc(["design", *MODEL, "--evaluations", "0", "--out", str(tmp_path)]) == 2
+    assert _rc(["design", *MODEL, "--evaluations", "0", "--out", str(tmp_path)]) == exitcodes.USAGE
     assert "argument --evaluations: must be >= 1, got '0'" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
 
@@ -56,7 +58,7 @@ def test_design_longer_than_memory_holds_says_so_before_allocating(tmp_path, cap
 
     free = available_memory()
     assert free is not None and free < 1e6 * 3600 * BYTES_PER_SAMPLE  # (any machine)
-    assert _rc(["design", *MODEL, "--hours", hours, "--out", str(tmp_path)]) == 2
+    assert _rc(["design", *MODEL, "--hours", hours, "--out", str(tmp_path)]) == exitcodes.USAGE
     err = capsys.readouterr().err
     h = f"{float(hours):g}"
     assert err.startswith(f"error: --hours {h}: a {h}-h program on a 1-s grid (")
@@ -67,7 +69,7 @@ def test_batch_on_a_symlink_loop(tmp_path, capsys, monkeypatch):
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")
     monkeypatch.chdir(tmp_path)
-    assert _rc(["batch", "a", "--out", str(tmp_path / "out")]) == 2
+    assert _rc(["batch", "a", "--out", str(tmp_path / "out")]) == exitcodes.NOINPUT
     err = capsys.readouterr().err
     assert err.startswith("error: a: cannot resolve the path (") and err.count("\n") == 1
     assert "ymlink" in err or "symbolic links" in err

@@ -13,7 +13,7 @@ that records the daemon's heartbeats. At each crash:
   ``ledger.jsonl`` (what a kill in the middle of an append leaves): ``diagnose`` and
   ``report`` on the crashed folder still work, and the resume cuts them.
 
-A second daemon resuming the folder while the first writes it is refused (exit 2). After
+A second daemon resuming the folder while the first writes it is refused (exit 73). After
 the last resume the run stops on a stop command: one run folder, ``samples.csv``
 starts with the acknowledged rows unchanged, the crash's bins are gaps (n = 0, never
 invented), the raw log continues in ``raw-2.blf``, ..., the ledger is kept, the estimates
@@ -31,6 +31,7 @@ from pathlib import Path
 import can
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.can.replay import read_log
 from gyrostand.cli import main as cli_main
@@ -161,7 +162,7 @@ def _crash_and_resume(tmp_path: Path, kills: int, duration: float) -> None:
         other = Daemon(cfg_path, "--out", str(runs), "--resume")
         daemons.append(other)
         rc2, err2 = other.finish(timeout=60)
-        assert rc2 == 2 and f"{run_dir}: in use by a running daemon (pid " \
+        assert rc2 == exitcodes.CANTCREAT and f"{run_dir}: in use by a running daemon (pid " \
             f"{daemons[-2].proc.pid})" in err2, err2
         ledger_before = (run_dir / "ledger.jsonl").read_text()
         send_paced(stand, frames[idx:], SPEED * 2)

@@ -1,9 +1,9 @@
 """A full disk is a fault, said once and named (issue 28, finding 12 and the exit codes):
-``gyrostand replay`` onto a 160 KiB tmpfs fills it, exits 1 naming the run folder and
+``gyrostand replay`` onto a 160 KiB tmpfs fills it, exits 74 naming the run folder and
 "No space left on device" and prints "result: not written" where only the provisional
 ``result.json`` (``"state": "running"``) is there (before: "result: .../result.json"
 printed over the provisional file, exit 0). Onto a disk full at start: one error line naming the file,
-exit 1, no "--- Logging error ---" traceback (before: six). Root only (a tmpfs is
+exit 74, no "--- Logging error ---" traceback (before: six). Root only (a tmpfs is
 mounted); skipped otherwise."""
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from pathlib import Path
 
 import can
 import pytest
+
+from gyrostand import exitcodes
 
 from .procs import ROOT, simulated_session
 
@@ -64,7 +66,7 @@ def test_replay_filling_the_disk_exits_1_and_claims_no_result(stand, tmpfs):
     cfg_path, log = stand
     disk = tmpfs("fill", "160k")
     r = _replay(cfg_path, log, disk)
-    assert r.returncode == 1, (r.stdout[-2000:], r.stderr[-2000:])
+    assert r.returncode == exitcodes.IOERR, (r.stdout[-2000:], r.stderr[-2000:])
     (run_dir,) = [p for p in disk.iterdir() if p.is_dir()]
     assert f"error: {run_dir}: " in r.stderr and "No space left on device" in r.stderr
     assert "result:     not written" in r.stdout
@@ -83,6 +85,7 @@ def test_replay_onto_a_full_disk_at_start_is_one_error(stand, tmpfs):
         except OSError:
             pass
     r = _replay(cfg_path, log, disk)
-    assert r.returncode == 1, (r.stdout[-2000:], r.stderr[-2000:])  # a fault, not bad input
+    # a failed write, not bad input
+    assert r.returncode == exitcodes.IOERR, (r.stdout[-2000:], r.stderr[-2000:])
     assert "No space left on device" in r.stderr and str(disk) in r.stderr
     assert "Traceback" not in r.stderr and "Logging error" not in r.stderr

@@ -1,5 +1,5 @@
-"""A run folder removed while ``gyrostand run`` writes it is a fault, exit 1 naming the
-file (issue 28, "Exit codes"; before: exit 2, bad input, which systemd does not restart:
+"""A run folder removed while ``gyrostand run`` writes it is a failed write, exit 74
+(IOERR) naming the file (issue 28, "Exit codes"; before: exit 2, bad input, which systemd does not restart:
 a raw FileNotFoundError reached the command line)."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import time
 import can
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.config import load_config
 from gyrostand.session.offline import simulated_frames
 
@@ -42,6 +43,6 @@ def test_run_folder_deleted_mid_run_is_exit_1(tmp_path):
         if bus is not None:
             bus.shutdown()
         srv.stop()
-    assert rc == 1, err
+    assert rc == exitcodes.IOERR, err
     assert f"error: {run_dir}/az/samples.csv: " in err and "No such file" in err, err
     assert "Traceback" not in err

@@ -1,6 +1,6 @@
 """Hostile input (issue 11, "crashes and hangs", "wrong results without a warning"): every
-case is a clean ``error: ...`` naming the input (exit status 2), never a traceback, a hang
-or a silently wrong answer. Random bytes as session files and ledgers (hypothesis) give a
+case is a clean ``error: ...`` naming the input (an exit status by its kind, 64..78),
+never a traceback, a hang or a silently wrong answer. Random bytes as session files and ledgers (hypothesis) give a
 ConfigError / DataError and nothing else."""
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 from gyrostand.config import load_config
 from gyrostand.errors import ConfigError, DataError
@@ -92,7 +93,7 @@ def test_session_file_errors_name_the_input(tmp_path, case, capsys):
     with pytest.raises(ConfigError, match=match) as err:
         load_config(path)
     assert str(err.value).startswith(str(path)) and len(str(err.value)) < 1500
-    assert cli_main(["simulate", str(path), "--out", str(tmp_path / "x.blf")]) == 2
+    assert cli_main(["simulate", str(path), "--out", str(tmp_path / "x.blf")]) == exitcodes.CONFIG
     assert capsys.readouterr().err.startswith("error: ")
 
 
@@ -185,7 +186,7 @@ def test_damaged_run_folder_files_are_errors_naming_them(run_folder, tmp_path, c
                                                          edit, match):
     run = _copy(run_folder, tmp_path)
     edit(run)
-    assert cli_main(["diagnose", str(run)]) == 2
+    assert cli_main(["diagnose", str(run)]) == exitcodes.DATAERR
     err = capsys.readouterr().err
     assert err.startswith("error: ") and __import__("re").search(match, err), err
 
@@ -196,7 +197,7 @@ def test_report_where_it_cannot_write_is_an_error_naming_the_path(run_folder, tm
     (run / "report-az").write_text("a file where the report folder goes")
     os.chmod(run, 0o555)
     try:
-        assert cli_main(["report", str(run)]) == 2
+        assert cli_main(["report", str(run)]) == exitcodes.CANTCREAT
     finally:
         os.chmod(run, 0o755)
     err = capsys.readouterr().err
@@ -222,7 +223,7 @@ def test_cli_numbers_are_checked(run_folder, tmp_path, capsys, argv, match):
         rc = cli_main(argv)
     except SystemExit as exc:  # argparse's usage error
         rc = exc.code
-    assert rc == 2
+    assert rc == exitcodes.USAGE
     assert match in capsys.readouterr().err
 
 

@@ -3,7 +3,7 @@
 
 - two FOGs sending one PGN from source addresses 0x80 and 0x81 on a `match: pgn` mapping:
   a warning at once naming the second address, its frames counted
-  (``rejected.second_source``) and never merged into the first device's bins, and exit 2
+  (``rejected.second_source``) and never merged into the first device's bins, and exit 65
   (before: every bin averaged both, n_drift 40, drift ≈ 5; only ``counter_jumps`` hinted);
 - ``source_address:`` on each gyro's channel: two gyros, each with its own device's bins;
 - one address mapped: the other device's frames are ignored and counted (``other_source``).
@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 DBC = Path(__file__).resolve().parents[1] / "data" / "fog2_j1939pg.dbc"
@@ -89,7 +90,7 @@ def test_two_devices_on_one_pgn_mapping_are_never_merged(stand, tmp_path, capsys
     tmp, log = stand
     cfg = _session(tmp, "merged", [_gyro("fog")])
     rc, doc, err = _replay(cfg, log, tmp_path, capsys)
-    assert rc == 2
+    assert rc == exitcodes.DATAERR
     assert "second J1939 source address" in err and "source_address:" in err
     assert "J1939 PGN 0xFF21 from a second source address 0x81 (the first was 0x80)" \
         in caplog.text
@@ -131,12 +132,12 @@ def test_source_address_needs_match_pgn_and_one_owner(stand, tmp_path, capsys):
     tmp, _ = stand
     g = _gyro("a", 0x80)
     g["drift"]["match"] = "id"
-    assert cli_main(["run", str(_session(tmp, "bad1", [g])), "--check"]) == 2
+    assert cli_main(["run", str(_session(tmp, "bad1", [g])), "--check"]) == exitcodes.CONFIG
     assert "gyros[0].drift.source_address: needs match: pgn" in capsys.readouterr().err
     cfg = _session(tmp, "bad2", [_gyro("a", 0x80), _gyro("b", 0x80)])
-    assert cli_main(["run", str(cfg), "--check"]) == 2
+    assert cli_main(["run", str(cfg), "--check"]) == exitcodes.CONFIG
     assert "gyros[1].drift.signal: FOG2_RATE.AngularRate is already mapped by gyros[0]" \
         in capsys.readouterr().err
     cfg = _session(tmp, "bad3", [_gyro("a", 0x80), _gyro("b")])
-    assert cli_main(["run", str(cfg), "--check"]) == 2
+    assert cli_main(["run", str(cfg), "--check"]) == exitcodes.CONFIG
     assert "FOG2_RATE is matched by pgn with source_address" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""A truncated MF4 log is one error line, exit 2 (issue 28, "Crashes"): before, the error
+"""A truncated MF4 log is one error line, exit 65 (issue 28, "Crashes"): before, the error
 was followed by asammdf's "Exception ignored in: <function MDF4.__del__ ...>" traceback
 (its half-opened reader failing to close at garbage collection)."""
 
@@ -9,6 +9,8 @@ import sys
 
 import can
 import pytest
+
+from gyrostand import exitcodes
 
 from .procs import DEMO, ROOT
 
@@ -28,7 +30,7 @@ def test_a_truncated_mf4_is_one_error_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "gyrostand", "replay", str(DEMO),
                         str(cut), "--out", str(tmp_path / "runs")], capture_output=True,
                        text=True, cwd=ROOT, timeout=120)
-    assert r.returncode == 2
+    assert r.returncode == exitcodes.DATAERR
     lines = r.stderr.splitlines()  # the progress line of the stage, then the error
     assert lines[-1].startswith(f"error: {cut}: cannot read CAN log: "), r.stderr
     assert "Exception ignored" not in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -27,8 +27,7 @@ from gyrostand.workbench import read_ledger
 
 def test_every_prefix_of_a_recorded_blf_reads_as_a_prefix_of_its_frames(tmp_path, caplog):
     path = tmp_path / "raw.blf"
-    rec = Recorder(path)
-    rec._writer.max_container_size = 512  # many containers in a small file
+    rec = Recorder(path, max_container_size=512)  # many containers in a small file
     sent = [can.Message(timestamp=1.7e9 + 0.01 * i, arbitration_id=0x100 + i % 3,
                         is_extended_id=False, data=i.to_bytes(8, "little"))
             for i in range(120)]
@@ -61,8 +60,7 @@ def test_every_prefix_of_a_recorded_blf_reads_as_a_prefix_of_its_frames(tmp_path
 
 def test_damage_inside_a_blf_is_skipped_counted_and_reading_goes_on(tmp_path, caplog):
     path = tmp_path / "raw.blf"
-    with Recorder(path) as rec:
-        rec._writer.max_container_size = 512
+    with Recorder(path, max_container_size=512) as rec:
         for i in range(200):
             rec.on_message_received(can.Message(timestamp=1.7e9 + i, arbitration_id=0x100,
                                                 is_extended_id=False, data=bytes(8)))

@@ -6,7 +6,7 @@ replay`` / ``init`` / ``run --check``:
   K used as °C gave beta 0.0062 / gamma -2.1e-5 instead of 0.054 / -1.6e-3);
 - a session whose units already are degC / deg/h gives byte-identical samples.csv with
   and without an explicit ``session.drift_unit: deg/h``;
-- a unit the project cannot convert is exit 2 naming the key path, the signal and unit;
+- a unit the project cannot convert is exit 78 (CONFIG) naming the key path, the signal and unit;
 - ``init`` says which conversion it proposes."""
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import math
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 from .procs import DBC, simulated_session
@@ -113,23 +114,23 @@ def test_same_units_give_byte_identical_samples(session, tmp_path, capsys):
     (DRIFT, "degC", "gyros[0].drift.signal"),
     (DRIFT, "km/h", "gyros[0].drift.signal"),
 ])
-def test_a_unit_that_cannot_be_converted_is_exit_2_naming_the_key(session, tmp_path,
+def test_a_unit_that_cannot_be_converted_is_exit_78_naming_the_key(session, tmp_path,
                                                                   capsys, signal, unit, path):
     tmp, cfg_path, log = session
     cfg = _variant(tmp, cfg_path, f"bad-{unit}", signal,
                    signal.replace(signal.rsplit('"', 2)[1], unit))
     rc, _, err = _replay(cfg, log, tmp_path, capsys)
-    assert rc == 2
+    assert rc == exitcodes.CONFIG
     assert f"{path}: " in err and f"unit {unit!r}" in err, err
     assert "Temperature" in err or "Drift" in err
     rc = cli_main(["run", str(cfg), "--check"])
-    assert rc == 2 and f"{path}: " in capsys.readouterr().err
+    assert rc == exitcodes.CONFIG and f"{path}: " in capsys.readouterr().err
 
 
 def test_an_unknown_drift_unit_is_refused(session, tmp_path, capsys):
     tmp, cfg_path, log = session
     cfg = _variant(tmp, cfg_path, "bad-session-unit", TEMP, TEMP, drift_unit="furlong")
-    assert cli_main(["run", str(cfg), "--check"]) == 2
+    assert cli_main(["run", str(cfg), "--check"]) == exitcodes.CONFIG
     assert "session.drift_unit: drift unit 'furlong'" in capsys.readouterr().err
 
 

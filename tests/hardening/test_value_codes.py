@@ -18,6 +18,7 @@ import cantools
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 
 from .procs import DBC, simulated_session
@@ -128,7 +129,7 @@ def test_valid_accept_in_the_session_drops_every_other_value(stand, tmp_path, ca
     assert doc["stats"]["decoder"]["rejected"]["invalid"] == n["invalid"] + n["degraded"]
     d["gyros"][0]["drift"]["valid"] = {"signal": "Nope", "accept": [0]}
     strict.write_text(yaml.safe_dump(d))
-    assert cli_main(["run", str(strict), "--check"]) == 2
+    assert cli_main(["run", str(strict), "--check"]) == exitcodes.CONFIG
     assert "gyros[0].drift.valid.signal: GYRO_DRIFT_1 has no signal 'Nope'" in \
         capsys.readouterr().err
 

@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.workbench import read_ledger
 
@@ -44,7 +45,7 @@ def test_identify_several_csvs_is_the_joint_fit(tmp_path, capsys):
 
 def test_identify_several_runs_needs_ml(tmp_path, capsys):
     paths, _ = _csvs(tmp_path, 32, 2, hours=1.0)
-    assert main(["identify", *map(str, paths), "--method", "lsq"]) == 2
+    assert main(["identify", *map(str, paths), "--method", "lsq"]) == exitcodes.USAGE
     assert "jointly by ml only" in capsys.readouterr().err
 
 

@@ -28,6 +28,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from gyrostand import exitcodes
+
 ROOT = Path(__file__).resolve().parents[2]
 PLUGIN = Path(__file__).resolve().parent / "gyrostand_temp_step"
 
@@ -198,7 +200,7 @@ def test_identify_with_a_plugin_term_from_a_csv(installed, tmp_path):
     # without the plugin on the path the term is unknown, and the error says so
     r = gyrostand("identify", str(tmp_path / "samples.csv"), "--model",
                   "markov,temp,temp_step", path=None, check=False)
-    assert r.returncode == 2 and "unknown model term 'temp_step'" in r.stderr
+    assert r.returncode == exitcodes.USAGE and "unknown model term 'temp_step'" in r.stderr
 
 
 def test_every_help_lists_the_installed_plugin_terms(installed):
@@ -217,7 +219,7 @@ def test_plugins_key_of_the_session_file(tmp_path):
     without = session_file(tmp_path, "nokey", ["markov", "temp"], ["ml"])
     r = gyrostand("simulate", str(without), "--log", str(tmp_path / "a.blf"), path=mods,
                   check=False)
-    assert r.returncode == 2
+    assert r.returncode == exitcodes.CONFIG
     assert "simulate.gyros.az.model" in r.stderr and "'temp_step'" in r.stderr
 
     cfg = session_file(tmp_path, "withkey", ["markov", "temp", "temp_step"], ["ml"],
@@ -229,7 +231,7 @@ def test_plugins_key_of_the_session_file(tmp_path):
                            plugins=["no_such_plugin_module"])
     r = gyrostand("simulate", str(missing), "--log", str(tmp_path / "c.blf"), path=mods,
                   check=False)
-    assert r.returncode == 2
+    assert r.returncode == exitcodes.CONFIG
     assert "plugins[0]" in r.stderr and "no_such_plugin_module" in r.stderr
 
 
@@ -244,7 +246,7 @@ def test_a_plugin_term_named_like_a_built_in_is_refused(tmp_path):
     cfg = session_file(tmp_path, "clash", ["markov", "temp"], ["ml"], plugins=["my_bias"])
     r = gyrostand("simulate", str(cfg), "--log", str(tmp_path / "x.blf"), path=mods,
                   check=False)
-    assert r.returncode == 2
+    assert r.returncode == exitcodes.CONFIG
     err = r.stderr
     assert "plugins[0]" in err and "my_bias.MyBias" in err  # the plugin ...
     assert "built-in term 'bias'" in err and "gyrostand.core.terms.builtin.Bias" in err  # ... and it

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
 from gyrostand.core.lkf.filter import lkf
@@ -212,5 +213,5 @@ def test_envelope_keeps_extremes_and_gaps():
 
 
 def test_cli_reports_a_missing_run_as_an_error(tmp_path, capsys):
-    assert main(["report", str(tmp_path / "nope")]) == 2
+    assert main(["report", str(tmp_path / "nope")]) == exitcodes.NOINPUT
     assert "error:" in capsys.readouterr().err

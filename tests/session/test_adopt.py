@@ -13,6 +13,7 @@ from pathlib import Path
 
 from sessionhelpers import ROOT, run_virtual
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.config import load_config
 from gyrostand.session.offline import simulated_frames
@@ -101,7 +102,7 @@ def test_adopt_edits_the_model_line_only_and_the_daemon_s_next_run_uses_it(tmp_p
     assert "lsq" not in az["fits"]
 
 
-def test_an_edit_that_does_not_validate_is_undone_exit_2(tmp_path, capsys):
+def test_an_edit_that_does_not_validate_is_undone_exit_78(tmp_path, capsys):
     # the gyro holds bias.b in its LKF: a model without bias makes that key invalid
     session = _session(tmp_path, lkf="    lkf: {held: {bias.b: 0.0}}   # held bias\n")
     text = session.read_text().replace("model: [markov, temp]", "model: [markov, temp, bias]")
@@ -110,7 +111,7 @@ def test_an_edit_that_does_not_validate_is_undone_exit_2(tmp_path, capsys):
     append_ledger(run / "ledger.jsonl", {"gyro": "az", "action": "fit",
                                          "model": ["markov", "temp", "white"]})
     capsys.readouterr()
-    assert main(["adopt", str(run)]) == 2
+    assert main(["adopt", str(run)]) == exitcodes.CONFIG
     err = capsys.readouterr().err
     assert "does not validate as `run --check` does" in err and "lkf.held.bias.b" in err
     assert "restored it" in err
@@ -121,5 +122,5 @@ def test_an_edit_that_does_not_validate_is_undone_exit_2(tmp_path, capsys):
 def test_adopt_names_a_missing_session_file(tmp_path, capsys):
     session = _session(tmp_path)
     run, _ = _daemon_run(session)
-    assert main(["adopt", str(run), "--config", str(tmp_path / "nope.yaml")]) == 2
+    assert main(["adopt", str(run), "--config", str(tmp_path / "nope.yaml")]) == exitcodes.NOINPUT
     assert "nope.yaml" in capsys.readouterr().err

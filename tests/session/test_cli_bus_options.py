@@ -17,6 +17,7 @@ import can
 import pytest
 from sessionhelpers import DEMO, decode, write_cfg_yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.bus import FrameEncoder
 from gyrostand.cli import build_parser, main
 from gyrostand.cli.common import with_bus_overrides
@@ -51,7 +52,7 @@ def test_options_override_only_the_keys_given():
 
 def test_global_options_work_after_the_subcommand(tmp_path, capsys):
     missing = str(tmp_path / "missing.csv")
-    assert main(["identify", missing]) == 2
+    assert main(["identify", missing]) == exitcodes.NOINPUT
     assert "error:" in capsys.readouterr().err
     with pytest.raises(Exception, match="missing.csv"):  # --debug: the traceback
         main(["identify", missing, "--debug"])
@@ -97,7 +98,7 @@ def test_simulate_log_and_its_deprecated_spelling(tmp_path, capsys, caplog):
     assert "deprecated: use --log" in caplog.text
     assert (tmp_path / "a.blf").read_bytes() == (tmp_path / "b.blf").read_bytes()
     capsys.readouterr()
-    assert main(["simulate", str(cfg_path), "--log", "x.blf", "--out", "y.blf"]) == 2
+    assert main(["simulate", str(cfg_path), "--log", "x.blf", "--out", "y.blf"]) == exitcodes.USAGE
     assert "not both" in capsys.readouterr().err
 
 

@@ -15,6 +15,7 @@ import can
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -51,7 +52,8 @@ def test_a_replay_that_decodes_nothing_is_bad_input_naming_the_ids_seen(tmp_path
         for i in range(3050):
             w.on_message_received(_strangers(i))
     path = _session(tmp_path)
-    assert main(["replay", str(path), str(log), "--out", str(tmp_path / "r"), *extra]) == 2
+    assert main(["replay", str(path), str(log), "--out", str(tmp_path / "r"), *extra]) == \
+        exitcodes.DATAERR
     err = capsys.readouterr().err.splitlines()
     (run_dir,) = (tmp_path / "r").iterdir()
     # 3050 frames: 50 extended; of the other 3000, 1000 are 0x456
@@ -69,7 +71,7 @@ def test_a_replay_of_an_empty_log_is_bad_input(tmp_path, capsys):
     with can.Logger(str(log)):
         pass
     assert main(["replay", str(_session(tmp_path)), str(log), "--out",
-                 str(tmp_path / "r")]) == 2
+                 str(tmp_path / "r")]) == exitcodes.DATAERR
     (run_dir,) = (tmp_path / "r").iterdir()
     assert capsys.readouterr().err.splitlines()[-1] == (
         f"error: replay: no CAN frame in the log, nothing measured; the run folder is kept: "
@@ -99,7 +101,7 @@ def test_a_run_on_a_bus_of_strangers_is_bad_input_and_a_silent_bus_a_fault(tmp_p
         t.join(5)
     err = capsys.readouterr().err.splitlines()[-1]
     (run_dir,) = (tmp_path / "a").iterdir()
-    assert rc == 2, err
+    assert rc == exitcodes.DATAERR, err
     assert re.fullmatch(r"error: run decoded none of ([\d,]+) frames \(unknown_id \1\); "
                         + re.escape(MAPPED) + r"; ids seen most: 0x123 \([\d,]+ frames\), "
                         r"0x456 \([\d,]+ frames\); the run folder is kept: "
@@ -110,7 +112,8 @@ def test_a_run_on_a_bus_of_strangers_is_bad_input_and_a_silent_bus_a_fault(tmp_p
     assert set(dec["unknown_ids"]) == {"0x123", "0x456"}
     # nobody on the bus: nothing received, a fault
     silent = _session(tmp_path, f"silent-{os.getpid()}")
-    assert main(["run", str(silent), "--duration", "0.2", "--out", str(tmp_path / "b")]) == 1
+    assert main(["run", str(silent), "--duration", "0.2", "--out", str(tmp_path / "b")]) == \
+        exitcodes.UNAVAILABLE
     (run_dir,) = (tmp_path / "b").iterdir()
     assert capsys.readouterr().err.splitlines()[-1] == (
         f"error: run: no CAN frame received on the bus, nothing measured; the run folder "

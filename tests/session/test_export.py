@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from sessionhelpers import write_cfg_yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.framesim import write_log
 from gyrostand.cli import main
 from gyrostand.config import load_config
@@ -69,6 +70,33 @@ def test_parquet_round_trip(run_dir, tmp_path, capsys):
     assert eu["lsq:temp.gamma"] == "(deg/h)/(s·°C)" and eu["lkf:markov.sigma"] == "deg/h"
 
 
+def test_parquet_units_visible_to_pandas(run_dir, tmp_path):
+    """pandas drops pyarrow's field metadata: the units also travel as pandas' attrs
+    (``PANDAS_ATTRS``), which ``pd.read_parquet`` restores; column names are unchanged and
+    pyarrow reads the same map, equal to the fields' ``unit``."""
+    import json
+
+    pd = pytest.importorskip("pandas")
+    assert main(["export", str(run_dir), "--parquet", "--out", str(tmp_path)]) == 0
+    for kind in ("samples", "estimates"):
+        path = tmp_path / "az" / f"{kind}.parquet"
+        df = pd.read_parquet(path)
+        table = pq.read_table(path)
+        assert list(df.columns) == table.column_names
+        fields = {f.name: f.metadata[b"unit"].decode() for f in table.schema}
+        assert df.attrs["units"] == fields
+        assert {k: df.attrs[k] for k in ("gyro", "run", "table")} == {
+            "gyro": "az", "run": run_dir.name, "table": kind}
+        assert json.loads(table.schema.metadata[b"PANDAS_ATTRS"]) == df.attrs
+    units = pd.read_parquet(tmp_path / "az" / "samples.parquet").attrs["units"]
+    assert units == {"t": "s", "drift": "deg/h", "temp": "degC", "n_drift": "",
+                     "n_temp": ""}
+    est = pd.read_parquet(tmp_path / "az" / "estimates.parquet")
+    assert est.attrs["units"]["lsq:temp.gamma"] == "(deg/h)/(s·°C)"
+    assert est.attrs["units"]["lkf:markov.beta:std"] == "1/s"
+    assert est.attrs["units"]["lkf:status"] == ""
+
+
 def test_result_json_carries_the_units_of_its_numbers(run_dir):
     """Units in every document (issue 27): result.json's gyro has the units the Parquet
     export's fields carry, each parameter's as the tables print it."""
@@ -114,11 +142,11 @@ def test_mf4_round_trip(run_dir, tmp_path, capsys):
 
 
 def test_errors(run_dir, tmp_path, capsys, monkeypatch):
-    assert main(["export", str(run_dir)]) == 2
+    assert main(["export", str(run_dir)]) == exitcodes.USAGE
     assert "choose a format: --parquet and/or --mf4" in capsys.readouterr().err
-    assert main(["export", str(tmp_path), "--parquet"]) == 2
+    assert main(["export", str(tmp_path), "--parquet"]) == exitcodes.NOINPUT
     assert "not a run folder (no result.json)" in capsys.readouterr().err
-    assert main(["export", str(run_dir), "--parquet", "--gyro", "zz"]) == 2
+    assert main(["export", str(run_dir), "--parquet", "--gyro", "zz"]) == exitcodes.DATAERR
     assert "no gyro 'zz' (the run has az)" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed
     with pytest.raises(ExportError, match=r"pip install 'gyrostand\[formats\]'"):
@@ -207,5 +235,5 @@ def test_bad_formats_are_config_errors_naming_the_key(run_dir, tmp_path, monkeyp
         load_config(path)
     capsys.readouterr()
     assert main(["replay", str(cfg_path), str(tmp_path / "none.blf"), "--data-format",
-                 "parquet"]) == 2
+                 "parquet"]) == exitcodes.CONFIG
     assert "error: --data-format: parquet needs the pyarrow package" in capsys.readouterr().err

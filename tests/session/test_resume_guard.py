@@ -1,9 +1,9 @@
 """Resume only continues a live folder of the same mapping, and re-anchors a clock that
 went back (issue 28, findings 2 and 10):
 
-- ``gyrostand run --resume REPLAY_FOLDER`` is exit 2 naming the folder's source (before:
+- ``gyrostand run --resume REPLAY_FOLDER`` is exit 78 (CONFIG) naming the folder's source (before:
   accepted, then ``"source": "live"`` with a raw log lacking the earlier rows);
-- ``run --resume`` with another drift (or temperature) message is exit 2 naming
+- ``run --resume`` with another drift (or temperature) message is exit 78 naming
   ``gyros[0].drift`` (before: two sensors in one samples.csv);
 - a crashed/stopped live folder resumed while the stand's clock went back 100 s or 5000 s:
   the new frames are a clock step re-anchored after the kept bins, every one binned
@@ -16,6 +16,7 @@ import pytest
 import yaml
 from sessionhelpers import make_cfg, run_virtual, write_cfg_yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main as cli_main
 from gyrostand.runfolder import read_samples_csv, samples_path
 from gyrostand.session.offline import run_replay, simulated_frames
@@ -34,7 +35,7 @@ def test_a_replay_folder_is_not_resumed(live, tmp_path, capsys):
     out, cfg, frames, _ = live
     rep = run_replay(cfg, frames, out=tmp_path / "rep")
     yml = write_cfg_yaml(tmp_path / "s.yaml", tmp_path, dict(cfg.bus))
-    assert cli_main(["run", str(yml), "--resume", str(rep.run_dir)]) == 2
+    assert cli_main(["run", str(yml), "--resume", str(rep.run_dir)]) == exitcodes.CONFIG
     err = capsys.readouterr().err
     assert f"{rep.run_dir}: a folder of a 'replay of <frames>', not of a live run" in err
 
@@ -45,7 +46,7 @@ def test_another_drift_message_is_not_resumed(live, tmp_path, capsys):
     d = yaml.safe_load(yml.read_text())
     d["gyros"][0]["drift"] = {"message": "GYRO_DRIFT_2", "signal": "Drift"}
     yml.write_text(yaml.safe_dump(d))
-    assert cli_main(["run", str(yml), "--resume", str(run_dir)]) == 2
+    assert cli_main(["run", str(yml), "--resume", str(run_dir)]) == exitcodes.CONFIG
     err = capsys.readouterr().err
     assert ("gyros[0].drift: GYRO_DRIFT_2 (0x101, standard).Drift in deg/h differs from "
             "the run folder's GYRO_DRIFT_1 (0x100, standard).Drift in deg/h") in err

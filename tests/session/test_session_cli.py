@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sessionhelpers import DEMO, ROOT, write_cfg_yaml
 
+from gyrostand import exitcodes
 from gyrostand.can.replay import read_log
 from gyrostand.cli import main
 from gyrostand.cli.demo import find_demo_config
@@ -121,10 +122,10 @@ def test_the_compile_clock_counts_a_compilation_and_names_it():
     assert again.kernels == 0 and "nothing compiled" in again.line()
 
 
-def test_errors_exit_2_with_a_message(tmp_path, capsys):
-    assert main(["run", str(tmp_path / "missing.yaml")]) == 2
+def test_errors_exit_by_their_kind_with_a_message(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "missing.yaml")]) == exitcodes.NOINPUT
     assert "error:" in capsys.readouterr().err
-    assert main(["simulate", str(ROOT / "tests" / "data" / "foreign.yaml")]) == 2
+    assert main(["simulate", str(ROOT / "tests" / "data" / "foreign.yaml")]) == exitcodes.CONFIG
     assert "simulate: missing" in capsys.readouterr().err
-    assert main(["replay", str(_cfg(tmp_path)), str(tmp_path / "none.blf")]) == 2
+    assert main(["replay", str(_cfg(tmp_path)), str(tmp_path / "none.blf")]) == exitcodes.NOINPUT
     assert "log file not found" in capsys.readouterr().err

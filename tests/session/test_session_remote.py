@@ -23,6 +23,7 @@ from gyrostand.session.offline import run_replay, simulated_frames
 
 pytest.importorskip("can_remote")
 
+from gyrostand import exitcodes
 from tests.hardening.procs import Daemon  # noqa: E402
 from tests.hardening.procs import free_port as _free_port  # noqa: E402
 from tests.hardening.procs import wait_port as _wait_port  # noqa: E402
@@ -141,7 +142,7 @@ def test_run_process_ends_with_fault_when_the_bus_dies(tmp_path):
         srv.kill()  # the server goes away under the daemon
         srv.wait(10)
     rc, err = daemon.finish()
-    assert rc == 1, err
+    assert rc == exitcodes.UNAVAILABLE, err
     assert any(line.startswith("stopped: bus failure") and "state fault" in line
                for line in daemon.out), daemon.out
     doc = json.loads((Path(ready.split(": ", 1)[1]) / "result.json").read_text())

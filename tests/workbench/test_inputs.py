@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.workbench.inputs import input_kind, read_input
 
@@ -112,10 +113,10 @@ def test_a_raw_log_without_its_session_is_refused_naming_config(stand, capsys):
     cfg, blf, _, run, _ = stand
     for cmd in ("identify", "diagnose", "fit", "report", "allan"):
         capsys.readouterr()
-        assert main([cmd, str(blf), "-q"]) == 2
+        assert main([cmd, str(blf), "-q"]) == exitcodes.USAGE
         err = capsys.readouterr().err
         assert f"{blf}: a raw CAN log" in err and "--config SESSION.yaml" in err, err
-    assert main(["identify", str(run), "--config", str(cfg), "-q"]) == 2
+    assert main(["identify", str(run), "--config", str(cfg), "-q"]) == exitcodes.USAGE
     assert "only a raw CAN log needs a session file" in capsys.readouterr().err
 
 
@@ -125,7 +126,7 @@ def test_a_log_of_another_stand_names_the_mapping(stand, tmp_path, capsys):
     other.write_text("date Mon Jan 1 00:00:00.000 am 2024\nbase hex  timestamps absolute\n"
                      "   0.001000 1  7FF             Rx   d 1 00\n"
                      "   0.002000 1  7FF             Rx   d 1 00\n")
-    assert main(["identify", str(other), "--config", str(cfg), "-q"]) == 2
+    assert main(["identify", str(other), "--config", str(cfg), "-q"]) == exitcodes.DATAERR
     err = capsys.readouterr().err
     assert "decoded none of 2 CAN frames through the DBC mapping" in err, err
 
@@ -138,5 +139,5 @@ def test_a_fifo_is_refused_without_blocking(tmp_path, capsys):
 
     fifo = tmp_path / "run.csv"
     os.mkfifo(fifo)
-    assert main(["identify", str(fifo)]) == 2
+    assert main(["identify", str(fifo)]) == exitcodes.NOINPUT
     assert "not a regular file or a run folder" in capsys.readouterr().err

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 
+from gyrostand import exitcodes
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.formula import sparse_formula
@@ -60,7 +61,8 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
     pkg = tmp_path / "gyrostand-cubic-t"
     assert (pkg / "gyrostand_cubic_t.py").is_file() and (pkg / "pyproject.toml").is_file()
     assert 'cubic_t = "gyrostand_cubic_t:CubicT"' in (pkg / "pyproject.toml").read_text()
-    assert main(["term", "new", "--from", str(csv), "--name", "cubic_t"]) == 2  # exists
+    # it exists
+    assert main(["term", "new", "--from", str(csv), "--name", "cubic_t"]) == exitcodes.CANTCREAT
     assert "exists" in capsys.readouterr().err
 
     # the generated module, registered as the session file's plugins: would, then the

@@ -31,7 +31,7 @@ import can
 
 from gyrostand.can.logs.frames import Frame, frame_fields
 from gyrostand.can.logs.textlog import TEXT_SUFFIXES, read_text_log
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import LogError, LogNotFoundError
 
 __all__ = ["read_log", "read_logs", "read_log_arrays", "read_logs_arrays", "LogDamage"]
 
@@ -109,7 +109,7 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
     path = Path(path)
     damage = damage if damage is not None else LogDamage()
     if not path.is_file():
-        raise CanEdgeError(f"{path}: log file not found")
+        raise LogNotFoundError(f"{path}: log file not found")
     suffix = path.suffix.lower()
     if suffix == ".blf":
         yield from _read_blf(path, damage)
@@ -125,11 +125,11 @@ def read_log(path: str | Path, damage: LogDamage | None = None) -> Iterator[can.
             failed = f"{path}: cannot read CAN log: {exc}"
         gc.collect()  # the half-built reader goes here, under the quiet hook
     if failed is not None:
-        raise CanEdgeError(failed)
+        raise LogError(failed)
     try:
         yield from reader
     except Exception as exc:
-        raise CanEdgeError(f"{path}: corrupt CAN log: {exc}") from exc
+        raise LogError(f"{path}: corrupt CAN log: {exc}") from exc
     finally:
         reader.stop()
 
@@ -144,14 +144,14 @@ def _read_blf(path: Path, damage: LogDamage, arrays: bool = False) -> Iterator[A
 
     size = path.stat().st_size
     if size < blf.FILE_HEADER_STRUCT.size:  # python-can: "unpack requires a buffer ..."
-        raise CanEdgeError(f"{path}: not a BLF log: " + (
-            "empty file (0 bytes)" if size == 0 else
-            f"{size} bytes, shorter than a BLF file header "
-            f"({blf.FILE_HEADER_STRUCT.size} bytes)"))
+        raise LogError(f"{path}: not a BLF log: " + (
+                       "empty file (0 bytes)" if size == 0 else
+                       f"{size} bytes, shorter than a BLF file header "
+                       f"({blf.FILE_HEADER_STRUCT.size} bytes)"))
     try:
         reader = blf.BLFReader(path)
     except Exception as exc:
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
+        raise LogError(f"{path}: cannot read CAN log: {exc}") from exc
     f = reader.file
     head_s, cont_s = blf.OBJ_HEADER_BASE_STRUCT, blf.LOG_CONTAINER_STRUCT
     lost = False  # after damage: the object stream is found again at an intact object

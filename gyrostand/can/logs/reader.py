@@ -26,7 +26,7 @@ from typing import Any, BinaryIO
 
 from gyrostand.can.logs.frames import ERROR_FRAME, EXTENDED_KEY_BIT, REMOTE_FRAME, Frame
 from gyrostand.can.logs.read import LogDamage, read_logs, read_logs_arrays
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import CanEdgeError, LogError, LogNotFoundError
 
 __all__ = ["ReaderProcess", "array_batches"]
 
@@ -35,12 +35,19 @@ __all__ = ["ReaderProcess", "array_batches"]
 # ``python -m gyrostand.can.logs.reader [--batch N] LOG...`` writes messages to its standard
 # output, each an 8-byte little-endian length and a pickle: ("frames", [Frame, ...]) |
 # ("arrays", FrameArrays) (with --arrays) |
-# ("log", level, logger, text) | ("damage", LogDamage.as_dict()) | ("error", text) |
+# ("log", level, logger, text) | ("damage", LogDamage.as_dict()) |
+# ("error", text, "missing" | "log") (a log not found, or one that cannot be read) |
 # ("end", frame count). A separate
 # interpreter started this way imports python-can and this module only (~0.1 s), where a
 # multiprocessing "spawn" child would import the parent's main module and all it imports.
 
 _HEADER = struct.Struct("<Q")
+
+
+def _error_kind(exc: Exception) -> str:
+    """What the parent raises for an error of the reader: "missing" (a log not found,
+    :class:`LogNotFoundError`) or "log" (:class:`LogError`)."""
+    return "missing" if isinstance(exc, LogNotFoundError) else "log"
 
 
 def _send(out: BinaryIO, obj: object) -> None:
@@ -124,7 +131,7 @@ def _reader_main(paths: Sequence[str], out: BinaryIO, batch: int, arrays: bool =
         if buf:
             _send(out, ("frames", buf))
         _send(out, ("damage", damage.as_dict()))
-        _send(out, ("error", error))
+        _send(out, ("error", error, _error_kind(exc)))
         return
     if buf:
         _send(out, ("frames", buf))
@@ -147,7 +154,7 @@ def _reader_arrays(paths: Sequence[str], out: BinaryIO, batch: int) -> None:
         error = str(exc) if isinstance(exc, CanEdgeError) else (
             f"{' + '.join(paths)}: cannot read CAN log: {type(exc).__name__}: {exc}")
         _send(out, ("damage", damage.as_dict()))
-        _send(out, ("error", error))
+        _send(out, ("error", error, _error_kind(exc)))
         return
     _send(out, ("damage", damage.as_dict()))
     _send(out, ("end", n))
@@ -170,8 +177,8 @@ class ReaderProcess:
     each batch is a :class:`~gyrostand.can.logs.blfarray.FrameArrays` (BLF containers parsed
     as arrays in the reader: :func:`read_log_arrays`).
 
-    Errors the reader meets are raised here as :class:`CanEdgeError` naming the file,
-    after the batches read before them; its log records are logged here. Leaving the
+    Errors the reader meets are raised here as :class:`LogError` (a log not found:
+    :class:`LogNotFoundError`) naming the file, after the batches read before them; its log records are logged here. Leaving the
     iteration early (or an error) stops the process. Memory stays bounded: the reader
     blocks while the pipe is full.
     """
@@ -208,8 +215,8 @@ class ReaderProcess:
                 body = read(size) if size >= 0 else b""
                 if size < 0 or len(body) != size:
                     code = proc.wait(10.0)
-                    raise CanEdgeError(f"{what}: the log reader process ended without "
-                                       f"finishing (exit code {code})")
+                    raise LogError(f"{what}: the log reader process ended without "
+                                   f"finishing (exit code {code})")
                 msg = pickle.loads(body)
                 kind = msg[0]
                 if kind in ("frames", "arrays"):
@@ -220,7 +227,7 @@ class ReaderProcess:
                 elif kind == "log":
                     logging.getLogger(msg[2]).log(msg[1], "%s", msg[3])
                 elif kind == "error":
-                    raise CanEdgeError(msg[1])
+                    raise (LogNotFoundError if msg[2:3] == ("missing",) else LogError)(msg[1])
                 else:  # "end"
                     return
         finally:

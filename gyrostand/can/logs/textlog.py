@@ -13,7 +13,6 @@ Used by :func:`~gyrostand.can.logs.read.read_log`.
 
 from __future__ import annotations
 
-import copy
 import re
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
-from gyrostand.errors import CanEdgeError
+from gyrostand.errors import LogError
 
 if TYPE_CHECKING:
     from gyrostand.can.logs.read import LogDamage
@@ -130,7 +129,7 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
         reader = make()
     except Exception as exc:
         lines.close()
-        raise CanEdgeError(f"{path}: cannot read CAN log: {exc}") from exc
+        raise LogError(f"{path}: cannot read CAN log: {exc}") from exc
     try:
         at = -1
         while True:
@@ -145,8 +144,8 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 return
             except Exception as exc:
                 if lines.n == at:  # nothing more was read: not a line's fault
-                    raise CanEdgeError(f"{path}: corrupt CAN log after line {at}: "
-                                       f"{type(exc).__name__}: {exc}") from exc
+                    raise LogError(f"{path}: corrupt CAN log after line {at}: "
+                                   f"{type(exc).__name__}: {exc}") from exc
                 at = lines.n
                 damage.lines += 1
                 damage.warn(f"{path}: line {lines.n}: cannot parse, skipped "
@@ -154,9 +153,11 @@ def read_text_log(path: Path, damage: LogDamage) -> Iterator[can.Message]:
                 if suffix == ".csv":
                     lines.unread(header)
                     reader = make()
-                else:
-                    nxt = copy.copy(reader)  # same file (at the next line), same state
-                    nxt._extract_header = lambda: None
-                    reader = nxt
+                elif suffix == ".asc":
+                    # the same reader goes on (its base and start time kept); iterating
+                    # reads a header first: give it the line that ends one, with the
+                    # value it has (the file's next line would be taken as header)
+                    lines.unread("internal events logged" if reader.internal_events_logged
+                                 else "no internal events logged")
     finally:
         lines.close()
