@@ -188,6 +188,17 @@ def ok_summary(cov, ats) -> tuple[str, bool]:
     return txt, all(v[1] >= OK_COVER for v in have.values())
 
 
+def cells(ats, runs, per_line=9, indent="      "):
+    """Lines of ``s:ok fraction/smallest coverage among ok over the coefficients`` at every
+    checkpoint of ``ats`` (``runs`` runs)."""
+    out = []
+    cs = [f"{k}:{n / runs:.2f}/{c:.2f}" if n else f"{k}:0"
+          for k, (n, c, _) in ok_coverage(ats).items()]
+    for i in range(0, len(cs), per_line):
+        out.append(indent + "  ".join(cs[i: i + per_line]))
+    return out
+
+
 def hour_table(recs):
     out = []
     passed = True
@@ -204,10 +215,7 @@ def hour_table(recs):
                    f"status at stop ok/warning/failed {st.count('ok')}/{st.count('warning')}/"
                    f"{st.count('failed')}; ML flat {sum(r['flat'] for r in rr)}, of them "
                    f"ok {flat_ok}" + ("" if ok and flat_ok == 0 else "  <-- target missed"))
-        cells = [f"{k}:{n}/{c:.2f}" if n else f"{k}:0"
-                 for k, (n, c, _) in ok_coverage(ats).items()]
-        for i in range(0, len(cells), 9):
-            out.append("      " + "  ".join(cells[i: i + 9]))
+        out += cells(ats, len(rr))
     return "\n".join(out), passed
 
 
@@ -254,7 +262,15 @@ def paper_table(recs):
                              f"{mlc:.3f}", f"{oc[0]:.3f} @{oc[1]} ({oc[2]} ok)",
                              f"{spread:.3f} ({mls:.3f})",
                              counts + ("" if ok else "  <-- target missed")))
-    return _fmt(head, rows), passed
+    lines = []
+    for case in CASES:
+        for sv in (0.0, SIGMA / 2):
+            rr = [r for r in recs if r["case"] == case and r["sv"] == sv]
+            if rr:
+                ats = [{k: (r["ok_at"][k], r["cover"][k]) for k in r["cover"]} for r in rr]
+                lines.append(f"  {case} σv={sv:g}: s:ok fraction/smallest coverage among ok over β, γ")
+                lines += cells(ats, len(rr))
+    return _fmt(head, rows) + "\n" + "\n".join(lines), passed
 
 
 def chamber_table(recs):
@@ -276,7 +292,9 @@ def chamber_table(recs):
     return _fmt(head, rows) + (f"\n  status at stop ok/warning/failed: {st.count('ok')}/"
                                f"{st.count('warning')}/{st.count('failed')}"
                                f"\n  coverage among ok at the 100-s checkpoints: {summ}"
-                               + ("" if ok else "  <-- target missed")), passed
+                               + ("" if ok else "  <-- target missed")
+                               + "\n  per checkpoint s:ok fraction/smallest coverage among ok over the coefficients\n"
+                               + "\n".join(cells(ats, len(recs), 10, "    "))), passed
 
 
 def cost(hours: float = 24.0):
@@ -344,8 +362,8 @@ def main() -> None:
             txt, ok = hour_table(recs)
             ok_all &= ok
             print(f"\n3. 1-h runs ({time.perf_counter() - t:.0f} s): per checkpoint "
-                  f"s:runs ok/their smallest coverage over the coefficients (target >= "
-                  f"{OK_COVER})\n{txt}")
+                  f"s:fraction of runs ok/smallest coverage among them over the coefficients "
+                  f"(target >= {OK_COVER})\n{txt}")
     if "cost" not in skip:
         n, el, relins, passes = cost()
         per = el / n * 1e3

@@ -12,8 +12,11 @@ bin (ms, wall and CPU; ``finish()`` apart), re-linearisations, total passes, re-
 (Σ passes × bins, per bin), the unsettled ones and the status at stop; then the ratio
 hidden/clean of the cost per bin (target <= 1.3) and the cost per bin (target <= 0.3 ms).
 Each record is run ``--repeat`` times, alternating; the fastest run of each counts.
+``--estimate`` also takes the estimate after every bin, as the daemon does for its
+``estimates.csv`` row (the status with β's profile likelihood, computed once per
+re-linearisation: ``gyrostand.core.lkf.band``).
 
-    .venv/bin/python benchmarks/lkf_cost.py [--hours 24] [--repeat 2]
+    .venv/bin/python benchmarks/lkf_cost.py [--hours 24] [--repeat 2] [--estimate]
 """
 
 from __future__ import annotations
@@ -46,14 +49,17 @@ def record(hidden: bool, hours: float):
                     seed=SEED)
 
 
-def run(samples) -> dict:
-    """The daemon's online LKF over ``samples``, timed."""
+def run(samples, estimate: bool = False) -> dict:
+    """The daemon's online LKF over ``samples``, timed (``estimate``: with the estimate
+    after every bin)."""
     tracker = LkfTrack(Model.parse(list(MODEL)), LkfConfig(), samples.dt)
     relins: list = []
     ys, Ts = samples.drift.tolist(), samples.temp.tolist()
     w0, c0 = time.perf_counter(), time.process_time()
     for y, T in zip(ys, Ts, strict=True):
         tracker.update(y, T)
+        if estimate:
+            tracker.estimate()
         f = tracker.filter
         if isinstance(f, RelinLKF) and f.last is not None and (
                 not relins or relins[-1] is not f.last):
@@ -77,15 +83,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--estimate", action="store_true",
+                    help="the estimate after every bin, as the daemon's estimates.csv")
     a = ap.parse_args()
     print(f"lkf_cost: {a.hours:g}-h chamber records, model {','.join(MODEL)}, hidden "
-          f"{HIDDEN}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+          f"{HIDDEN}{'; the estimate after every bin' if a.estimate else ''}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     data = {"clean": record(False, a.hours), "hidden": record(True, a.hours)}
     run(record(True, 0.5))  # compile / load the kernels
     best: dict[str, dict] = {}
     for _ in range(a.repeat):
         for name, s in data.items():
-            r = run(s)
+            r = run(s, a.estimate)
             if name not in best or r["wall"] < best[name]["wall"]:
                 best[name] = r
     for name, r in best.items():

@@ -36,7 +36,7 @@ from scipy.special import gammaincinv
 
 from ..errors import GyrostandError
 from .data import Samples
-from .lkf.band import band_warnings
+from .lkf.band import band_warnings, calibrated_estimates
 from .lkf.filter import OnlineLKF, held_names, held_values, lkf_layout, relin_fit
 from .lkf.relin import RelinLKF
 from .lsq.fit import OnlineLSQ, lsq
@@ -359,7 +359,8 @@ class LkfTrack:
             note = self.failed or f"warm-up: {self.observed} of {self.cfg.warmup} bins"
             return OnlineEstimate("lkf", "failed" if self.failed else "insufficient_data",
                                   {n: (NAN, NAN) for n in names}, self.observed, NAN, note)
-        est = self.filter.estimates
+        est = (calibrated_estimates(self.filter) if isinstance(self.filter, RelinLKF)
+               else self.filter.estimates)
         assert self.point is not None
         held = self.filter.held if isinstance(self.filter, RelinLKF) else self.point.held
         vals = {n: est[n] if n in est else (held.get(n, NAN), 0.0) for n in names}
@@ -381,7 +382,8 @@ class LkfTrack:
                 "point_from": self.point.source if self.point else ""}
         if isinstance(f, RelinLKF):
             first = max(len(samples) - f.n, 0)
-            return relin_fit(f, samples, warnings, info, first)
+            return relin_fit(f, samples, warnings, info, first,
+                             stds={n: v[1] for n, v in calibrated_estimates(f).items()})
         est = f.estimates
         model = self.model
         params = {n: (Estimate(est[n][0], est[n][1], model.unit(n)) if n in est else

@@ -1,6 +1,7 @@
 """The paper's linearised Kalman filter with a moving linearisation point: over a record
 (:mod:`.filter`), one bin at a time (:mod:`.online`), made to converge (:mod:`.relin`, its
-held noise levels in :mod:`.noise`), compiled (:mod:`.kernel`).
+held noise levels in :mod:`.noise`), compiled (:mod:`.kernel`); its band's status
+(:mod:`.band`) and β's profile likelihood (:mod:`.profile`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ EXPORTS: dict[str, str] = {
     "RelinLKF": "relin",
     "RelinSchedule": "schedule",
     "band_warnings": "band",
+    "calibrated_estimates": "band",
+    "profile_interval": "profile",
 }
 __all__ = sorted(EXPORTS)
 __getattr__, __dir__ = exports(__name__, EXPORTS, globals())

@@ -309,10 +309,18 @@ def _relin_regressors(samples: Samples, model: Model, hv: Mapping[str, float], f
 
 
 def relin_fit(f, samples: Samples, warnings: list[str], info: Mapping, first: int = 0,
-              method: str = "lkf") -> FitResult:
+              method: str = "lkf", stds: Mapping[str, float] | None = None) -> FitResult:
     """A :class:`FitResult` of a :class:`~gyrostand.core.lkf.relin.RelinLKF`'s current
-    state; its bins are those of ``samples`` from ``first`` on (innovations aligned)."""
+    state; its bins are those of ``samples`` from ``first`` on (innovations aligned).
+    ``stds`` replaces the filter's stds (the online band widened to its profile
+    interval: :func:`~gyrostand.core.lkf.band.calibrated_estimates`), the covariance
+    scaled to them with its correlations kept."""
     est = f.estimates
+    cov = f.covariance
+    if stds:
+        scale = np.array([stds[n] / est[n][1] if est[n][1] > 0 else 1.0 for n in f.params])
+        cov = cov * np.outer(scale, scale)
+        est = {n: (v, stds.get(n, s)) for n, (v, s) in est.items()}
     if est["markov.beta"][0] <= 0:
         warnings.append(f"lkf: beta = {est['markov.beta'][0]:.3g} <= 0 (not mean-reverting)")
     params = {}
@@ -333,7 +341,7 @@ def relin_fit(f, samples: Samples, warnings: list[str], info: Mapping, first: in
         method=method, model=f.model, parameters=params, loglik=None, residuals=e,
         residual_var=v, warnings=tuple(dict.fromkeys(warnings)), source=samples.source,
         n_samples=N, n_observed=samples.n_observed, dt=samples.dt,
-        covariance=f.covariance, cov_names=tuple(f.params),
+        covariance=cov, cov_names=tuple(f.params),
         info={"variant": "relin", "linearization": dict(zip(
                   f.params, map(float, f.to_model(f.point)[0]), strict=True)),
               "relinearizations": f.relinearizations, "passes": f.total_passes,
