@@ -75,7 +75,9 @@ def main() -> None:
                    "--out", str(work / name)]
             before = os.times()
             t0 = time.perf_counter()
-            p = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            # run in the tree: ``-m`` puts the working folder first on sys.path, before
+            # PYTHONPATH (from elsewhere, --tree timed the caller's checkout)
+            p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=a.tree)
             wall = time.perf_counter() - t0
             after = os.times()
             cpu = (after.children_user - before.children_user

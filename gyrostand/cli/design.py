@@ -239,7 +239,7 @@ def _verify_profile(model, params, limits, t, temp, n: int, seed: int, label: st
     # the fits side by side in worker processes, in the runs' order
     with progress.stage("design", f"verify {label}", total=n, unit="fits") as bar:
         fits = []
-        for r in pool.map(fit_values, runs, [model] * n, [dict(params)] * n):
+        for r in pool.map(fit_values, runs, [model] * n):
             fits.append(r)
             bar.update(1)
     for r in fits:
@@ -252,18 +252,13 @@ def _verify_profile(model, params, limits, t, temp, n: int, seed: int, label: st
             "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}, est
 
 
-def fit_values(samples: Any, model: Any, truth: dict[str, float] | None = None
-               ) -> dict[str, float] | None:
+def fit_values(samples: Any, model: Any) -> dict[str, float] | None:
     """The ML estimates of one verify run (None: the fit failed); no standard errors
-    (the same estimates, a sixth less work). ``truth``: the simulated run's parameters,
-    an extra start of the fit, and only the best start is optimised locally (the maximum
-    a user's fit reaches from its grid, found in ~0.35x the CPU: measured on the worst
-    example's runs, benchmarks/results/design_speed.txt). Runs in a worker process."""
+    (the same estimates, a sixth less work). Runs in a worker process."""
     from ..core.ml.fit import ml
 
-    warm: dict[str, Any] = {} if truth is None else {"start": truth, "n_local": 1}
     try:
-        r = ml(samples, model, std_errors=False, **warm)
+        r = ml(samples, model, std_errors=False)
     except Exception:  # noqa: BLE001 - a failed fit is counted, as before
         return None
     return {k: r.value(k) for k in model.param_names}

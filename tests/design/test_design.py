@@ -152,21 +152,3 @@ def test_six_hour_design_halves_the_worst_std_and_simulations_confirm_it():
         vals = [ml(simulate(model, TRUTH, t=lim.grid, temp=case, seed=rng), model).value(name)
                 for _ in range(100)]
         assert np.std(vals, ddof=1) == pytest.approx(pred[name], rel=0.2), label
-
-
-def test_verify_fits_warm_started_from_the_truth_reach_the_full_fits_maximum():
-    """#25 item 4: --verify's fits start from the simulated truth and optimise only the
-    best start; they reach the likelihood of the full grid-started fit (to 1e-3) and its
-    well-determined estimates."""
-    from gyrostand.cli.design import fit_values
-    from gyrostand.core.simulation import simulate
-
-    model = Model.parse(MODEL)
-    lim = ChamberLimits(0, 50, 1 / 60, 600, 2 * 3600, legs=4)
-    case = case_temperature(standard_cycle(lim).setpoint(lim.duration), lim)
-    run = simulate(model, TRUTH, t=lim.grid, temp=case, seed=np.random.default_rng(7))
-    warm, full = fit_values(run, model, dict(TRUTH)), fit_values(run, model)
-    assert warm is not None and full is not None
-    assert model.loglik(warm, run) >= model.loglik(full, run) - 1e-3
-    for n in ("markov.beta", "markov.sigma", "temp.gamma", "white.sigma", "hysteresis.h"):
-        assert warm[n] == pytest.approx(full[n], rel=1e-2), n
