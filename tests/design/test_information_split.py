@@ -6,7 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrostand.core.design.fisher import fisher_information, information, noise_information
+from gyrostand.core.design.fisher import (
+    fisher_information,
+    information,
+    mean_free,
+    mean_information,
+    noise_information,
+)
 from gyrostand.core.design.search import (
     ChamberLimits,
     case_temperature,
@@ -55,3 +61,19 @@ def test_the_search_is_the_same_on_one_thread_or_two():
     one = design(MODEL, TRUTH, LIM, workers=1, **kw)
     two = design(MODEL, TRUTH, LIM, workers=2, **kw)
     assert one.program == two.program and one.predicted == two.predicted
+
+
+def test_noise_levels_the_mean_ignores_are_skipped_for_the_same_information():
+    """#25 item 4: the noise levels' ∂μ/∂θ is 0 on every program, so the search skips
+    their differences; the information is bit-for-bit the one with them differenced."""
+    ref = case_temperature(standard_cycle(LIM).setpoint(LIM.duration), LIM)
+    still = mean_free(MODEL, TRUTH, LIM.grid, ref)
+    assert still == ("markov.sigma", "white.sigma")
+    zig = case_temperature(zigzag(LIM).setpoint(LIM.duration), LIM)
+    full, names = mean_information(MODEL, TRUTH, LIM.grid, zig)
+    fast, names2 = mean_information(MODEL, TRUTH, LIM.grid, zig, still=still)
+    assert names == names2 and np.array_equal(full, fast)
+    # a parameter the mean does depend on is not skipped by mean_free, and skipping it
+    # by hand changes the information (the test can fail)
+    cut, _ = mean_information(MODEL, TRUTH, LIM.grid, zig, still=("markov.beta",))
+    assert "markov.beta" not in still and not np.array_equal(full, cut)

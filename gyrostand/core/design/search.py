@@ -45,7 +45,7 @@ import numpy as np
 from ...errors import ModelError
 from ..model import Model
 from ..profiles import TemperatureProfile
-from .fisher import information, noise_information
+from .fisher import information, mean_free, noise_information
 
 __all__ = ["ChamberLimits", "Program", "DesignResult", "case_temperature",
            "standard_cycle", "zigzag", "predicted_std", "design", "search", "search_budget",
@@ -401,9 +401,13 @@ def design(model: Model, params: Mapping[str, float], limits: ChamberLimits, *,
     noise = noise_information(model, params, limits.grid.size, dt=limits.dt, free=free,
                               n_mc=n_mc_report, seed=seed + 1)[0]
 
+    # noise levels the mean does not depend on: their ∂μ/∂θ is 0 on every program
+    still = mean_free(model, params, limits.grid, case_temperature(
+        ref.setpoint(limits.duration), limits), dt=limits.dt, free=free)
+
     def objective(case: np.ndarray) -> float:
         info, names = information(model, params, limits.grid, case, dt=limits.dt,
-                                  free=free, noise=noise)
+                                  free=free, noise=noise, still=still)
         return f_goal(info, names)
 
     prog, count = search(objective, limits, ref, starts=starts, maxfev=maxfev, seed=seed,
