@@ -418,6 +418,7 @@ TEST_TEXT = {
     "chi2 +1 df": "χ²(df), one df for a parameter unidentified under the null",
     "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
                       "characteristic; df = coefficients)",
+    "score test": "score (LM) test, χ²(df), screened: not refitted",
 }
 
 
