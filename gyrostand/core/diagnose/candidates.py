@@ -253,7 +253,7 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
     scores = score_tests(samples, model, base, [t for t in todo if screenable(
-        samples, model, t)]) if screen else {}
+        samples, model, t)], also) if screen else {}
     keep = to_refit(scores)
     fitted = [t for t in todo if t not in scores or t in keep]
     for term in todo:
