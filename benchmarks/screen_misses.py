@@ -42,11 +42,13 @@ def one_step(s, model: Model) -> tuple[int, int, int, int, list[str]]:
     terms = candidate_terms(model)
     full = {c.term: c for c in rank_candidates(s, model, fit, terms, also=also,
                                                 screen=False)}
-    scores = score_tests(s, model, fit, [t for t in terms if screenable(s, model, t)], also)
-    keep = to_refit(scores)
+    # as rank_candidates: screened only where the reference shows no lack of fit
+    scores = score_tests(s, model, fit, [t for t in terms if screenable(s, model, t)])
+    keep = to_refit(scores) if also is None else set(scores)
     out = [t for t in scores if t not in keep]
     level = ALPHA / max(len(full), 1)
-    lines, miss_b, miss_n = [], 0, 0
+    lines, miss_b, miss_n = [f"    lack of fit: {'yes, nothing screened' if also else 'no'} "
+                             f"(reference p {ref.p_value:.2g})"], 0, 0
     for t in terms:
         c = full.get(t)
         if c is None:

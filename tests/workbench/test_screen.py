@@ -85,9 +85,10 @@ def test_the_screen_keeps_the_significant_and_the_top_two():
 
     sc = {t: Score(t, stat, 1, p, (), 0.0) for t, stat, p in
           (("a", 0.1, 0.75), ("b", 0.5, 0.48), ("c", 2.0, 0.16), ("d", 0.01, 0.92))}
-    assert to_refit(sc) == {"c", "b"}  # c: p < 0.2; b: second by score
-    assert to_refit(sc, top=0) == {"c"} and to_refit(sc, p_screen=0.5, top=1) == {"b", "c"}
-    assert SCREEN_P == 0.2
+    assert to_refit(sc) == {"c", "b"}  # c: p < 0.5 and first; b: p < 0.5 and second
+    assert to_refit(sc, p_screen=0.8, top=0) == {"a", "b", "c"}
+    assert to_refit(sc, top=0) == {"b", "c"} and to_refit(sc, p_screen=0.2, top=0) == {"c"}
+    assert SCREEN_P == 0.5
 
 
 def test_a_screened_candidate_is_shown_as_such():

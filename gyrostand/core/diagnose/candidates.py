@@ -252,8 +252,10 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
+    # screened only where the reference shows no lack of fit (``also`` None): see
+    # :mod:`.screen` for the misses measured otherwise
     scores = score_tests(samples, model, base, [t for t in todo if screenable(
-        samples, model, t)], also) if screen else {}
+        samples, model, t)]) if screen and not also else {}
     keep = to_refit(scores)
     fitted = [t for t in todo if t not in scores or t in keep]
     for term in todo:
