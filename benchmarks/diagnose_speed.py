@@ -30,7 +30,7 @@ import numpy as np
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.candidates import rank_candidates
 from gyrostand.core.diagnose.diagnostics import diagnose_fit
-from gyrostand.core.diagnose.reference import reference_fit
+from gyrostand.core.diagnose.reference import REPORT_ALPHA, reference_fit
 from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
@@ -74,7 +74,11 @@ def main() -> None:
     for c in sorted(cands, key=lambda c: -c.seconds):
         print(f"    {c.term:<12} {c.seconds:6.2f} s   LR {c.lr_stat:8.2f}  p {c.p_value:.2g}")
     print(f"ranked first: {cands[0].term}")
-    side_by_side(s, m, fit)
+    side_by_side(s, m, fit, "hidden temp_rate")
+    clean = simulate(Model.parse("markov,temp,bias"), truth, chamber_profile(6.0), seed=3)
+    clean = Samples.from_arrays(clean.t, clean.drift, np.round(clean.temp / 0.05) * 0.05)
+    cfit = ml(clean, m)
+    side_by_side(clean, m, cfit, "clean 6-h run")
     t5 = time.perf_counter()
     rep = diagnose(s, m, base=fit)
     print(f"whole diagnose() from the fit (candidates, identification, competitors, model "
@@ -86,14 +90,21 @@ def main() -> None:
     commands(s)
 
 
-def side_by_side(s: Samples, m: Model, fit) -> None:
-    """Candidates with and without the score screen, CPU seconds of all threads."""
+def side_by_side(s: Samples, m: Model, fit, what: str) -> None:
+    """Candidates with and without the score screen, CPU seconds of all threads, started
+    also from the reference's random part where it shows a lack of fit (as diagnose:
+    then nothing is screened)."""
+    ref = reference_fit(s, m, fit)
+    also = ({n: float(ref.fit.values[n]) for n in ref.noise_names}
+            if ref.fit is not None and ref.p_value < REPORT_ALPHA else None)
+    print(f"{what}: reference lack of fit p {ref.p_value:.2g}"
+          f"{' (screen off)' if also else ''}")
     for screen in (False, True, False, True):
         c0, w0 = time.process_time(), time.perf_counter()
-        cands = rank_candidates(s, m, fit, screen=screen)
+        cands = rank_candidates(s, m, fit, also=also, screen=screen)
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         out = [c.term for c in cands if c.screened]
-        print(f"candidates {'screened ' if screen else '--no-screen'}  CPU {cpu:6.2f} s  wall "
+        print(f"  candidates {'screened ' if screen else '--no-screen'}  CPU {cpu:6.2f} s  wall "
               f"{wall:6.2f} s  refitted {len(cands) - len(out)}, screened out "
               f"{', '.join(out) or 'none'}; first {cands[0].term}")
 
