@@ -6,20 +6,31 @@ candidate terms — under 10 s on this
 machine. Prints the time of each part, each candidate's fit, and the ratio to the anchor.
 The data hide a ``temp_rate`` effect so that the ranking has something to find.
 
+Also (issue 25 item 2): the candidates with the score screen and without (``--no-screen``)
+side by side, by CPU time of the process's threads; and the whole commands ``gyrostand
+diagnose`` (screened and ``--no-screen``) against ``gyrostand identify --method ml`` on
+the same 6-h CSV, by the CPU time of each child process (the acceptance: diagnose's CPU
+<= 2.5 x identify's).
+
 Run: ``.venv/bin/python benchmarks/diagnose_speed.py``
 """
 
 from __future__ import annotations
 
 import os
+import resource
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.candidates import rank_candidates
 from gyrostand.core.diagnose.diagnostics import diagnose_fit
-from gyrostand.core.diagnose.reference import reference_fit
+from gyrostand.core.diagnose.reference import REPORT_ALPHA, reference_fit
 from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
@@ -48,7 +59,7 @@ def main() -> None:
     t2 = time.perf_counter()
     ref = reference_fit(s, m, fit)
     tr = time.perf_counter()
-    cands = rank_candidates(s, m, fit)
+    cands = rank_candidates(s, m, fit, screen=False)
     t3 = time.perf_counter()
     err = fit_error(fit, s, reference=ref)
     t4 = time.perf_counter()
@@ -63,6 +74,11 @@ def main() -> None:
     for c in sorted(cands, key=lambda c: -c.seconds):
         print(f"    {c.term:<12} {c.seconds:6.2f} s   LR {c.lr_stat:8.2f}  p {c.p_value:.2g}")
     print(f"ranked first: {cands[0].term}")
+    side_by_side(s, m, fit, "hidden temp_rate")
+    clean = simulate(Model.parse("markov,temp,bias"), truth, chamber_profile(6.0), seed=3)
+    clean = Samples.from_arrays(clean.t, clean.drift, np.round(clean.temp / 0.05) * 0.05)
+    cfit = ml(clean, m)
+    side_by_side(clean, m, cfit, "clean 6-h run")
     t5 = time.perf_counter()
     rep = diagnose(s, m, base=fit)
     print(f"whole diagnose() from the fit (candidates, identification, competitors, model "
@@ -71,6 +87,59 @@ def main() -> None:
     print(f"total diagnose {total:.2f} s = {total / ANCHOR_S:.2f} x the {ANCHOR_S:.0f}-s anchor "
           f"({'PASS' if total < ANCHOR_S else 'MISS'}); "
           f"mean per candidate {(t3 - tr) / len(cands):.2f} s")
+    commands(s)
+
+
+def side_by_side(s: Samples, m: Model, fit, what: str) -> None:
+    """Candidates with and without the score screen, CPU seconds of all threads, started
+    also from the reference's random part where it shows a lack of fit (as diagnose:
+    then nothing is screened)."""
+    ref = reference_fit(s, m, fit)
+    also = ({n: float(ref.fit.values[n]) for n in ref.noise_names}
+            if ref.fit is not None and ref.p_value < REPORT_ALPHA else None)
+    print(f"{what}: reference lack of fit p {ref.p_value:.2g}"
+          f"{' (screen off)' if also else ''}")
+    for screen in (False, True, False, True):
+        c0, w0 = time.process_time(), time.perf_counter()
+        cands = rank_candidates(s, m, fit, also=also, screen=screen)
+        cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+        out = [c.term for c in cands if c.screened]
+        print(f"  candidates {'screened ' if screen else '--no-screen'}  CPU {cpu:6.2f} s  wall "
+              f"{wall:6.2f} s  refitted {len(cands) - len(out)}, screened out "
+              f"{', '.join(out) or 'none'}; first {cands[0].term}")
+
+
+def child_cpu(cmd: list[str]) -> float:
+    """CPU seconds (user + system) of one child process run to its end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def commands(s: Samples) -> None:
+    """diagnose ÷ identify --method ml, CPU of whole processes on the same 6-h CSV."""
+    gyro = [sys.executable, "-m", "gyrostand"]
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "run6h.csv"
+        s.to_csv(csv)
+        ident = [gyro + ["identify", str(csv), "--method", "ml", "--json"]]
+        diag = gyro + ["diagnose", str(csv), "--model", "markov,temp,bias"]
+        child_cpu(ident[0])  # warm: numba's cache
+        rows = {"identify --method ml": ident[0], "diagnose --no-screen":
+                diag + ["--no-screen"], "diagnose": diag}
+        cpu = {k: [] for k in rows}
+        for _ in range(2):
+            for k, cmd in rows.items():
+                cpu[k].append(child_cpu(cmd))
+        best = {k: min(v) for k, v in cpu.items()}
+        for k, v in best.items():
+            print(f"  {k:<22} CPU {v:6.2f} s (best of 2)  = {v / best['identify --method ml']:.2f}"
+                  " x identify")
+        r = best["diagnose"] / best["identify --method ml"]
+        print(f"diagnose CPU / identify --method ml CPU = {r:.2f} (acceptance <= 2.5: "
+              f"{'PASS' if r <= 2.5 else 'MISS'}); --no-screen "
+              f"{best['diagnose --no-screen'] / best['identify --method ml']:.2f}")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,9 @@ def add_parser(sub: Any) -> None:
                                         "effects")
     add_subject_args(p, several=True)
     add_format_args(p, "the diagnosis")
+    p.add_argument("--no-screen", action="store_true",
+                   help="refit every candidate term (by default a score test screens them "
+                        "first and only those it cannot rule out are refitted)")
     p.set_defaults(func=run)
 
 
@@ -35,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     args.run = args.run[0]
     subject = subject_of(args)
-    rep = run_diagnose(subject)
+    rep = run_diagnose(subject, screen=not args.no_screen)
     with progress.stage("diagnose", "Allan tables"):
         allan = AllanView.of_diagnosis(subject, rep)
     emit(DiagnosisView(rep, f"{subject.samples.source} (gyro {subject.gyro})",

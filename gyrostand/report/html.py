@@ -182,9 +182,11 @@ def candidates(rep: DiagnoseResult) -> str:
                           for k, x in c.effect.items())
         note = f"<br>({e(c.note)})" if c.note else ""
         rows.append([f"{i}. {'★ ' if c.term in sig else ''}<code>{e(c.term)}</code>",
-                     num(c.lr_stat, ".2f"), str(c.df), num(c.p_value, ".2g"),
-                     num(c.delta_aic, ".1f"), num(c.delta_bic, ".1f"),
-                     num(c.rms_after), eff + note])
+                     ("LM " if c.screened else "") + num(c.lr_stat, ".2f"), str(c.df),
+                     num(c.p_value, ".2g"),
+                     *(["—"] * 3 if c.screened else
+                       [num(c.delta_aic, ".1f"), num(c.delta_bic, ".1f"), num(c.rms_after)]),
+                     (eff + note).removeprefix("<br>")])
         classes.append("sig" if c.term in sig else "")
     out.append(table(["term", "LR", "df", "p", "ΔAIC", "ΔBIC", "RMS after", "effect"],
                      rows, row_class=classes) if rows else "<p>No candidate terms.</p>")

@@ -90,8 +90,12 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         eff = "; ".join(f"{k} = {estimate(e.value, e.std, e.unit, False, u)}"
                         for k, e in c.effect.items())
         star = "*" if c.ranked and c.p_value < rep.alpha / m else " "
-        lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
-                     f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
+        if c.screened:  # no refit: its score (LM) test in place of the LR
+            lines.append(f"  {c.term:<12} {'LM ' + format(c.lr_stat, '.2f'):>8} {c.df:3d} "
+                         f"{c.p_value:9.2g} {'—':>8} {'—':>8} {'—':>10}")
+        else:
+            lines.append(f"{star} {c.term:<12} {c.lr_stat:8.2f} {c.df:3d} {c.p_value:9.2g} "
+                         f"{c.delta_aic:8.1f} {c.delta_bic:8.1f} {c.rms_after:10.4g}  {eff}")
         if c.note:
             lines.append(f"  {'':<12} ({c.note})")
         if c.traded:
@@ -414,6 +418,7 @@ TEST_TEXT = {
     "chi2 +1 df": "χ²(df), one df for a parameter unidentified under the null",
     "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
                       "characteristic; df = coefficients)",
+    "score test": "score (LM) test, χ²(df), screened: not refitted",
 }
 
 

@@ -49,10 +49,11 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagnose"
-                 ) -> DiagnoseResult:
+def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagnose",
+                 screen: bool = True) -> DiagnoseResult:
     """Diagnose the subject's current model; append the step to the ledger. Its stages
-    show as ``command``'s progress (:mod:`gyrostand.progress`, on in the CLI only)."""
+    show as ``command``'s progress (:mod:`gyrostand.progress`, on in the CLI only).
+    ``screen=False``: refit every candidate (no score screen)."""
     from .. import progress
 
     with progress.stage(command, f"ML fit of {','.join(subject.model.names)}"):
@@ -61,7 +62,7 @@ def run_diagnose(subject: Subject, *, record: bool = True, command: str = "diagn
     with progress.stage(command, "candidates, reference, residuals, floor",
                         total=n, unit="candidates") as st:
         rep = diagnose(subject.samples, subject.model, base=fit, unit=subject.unit,
-                       on_candidate=lambda term: st.update(1))
+                       on_candidate=lambda term: st.update(1), screen=screen)
     if rep.look_alikes:
         rep = with_design_commands(rep, subject)
     if record:

@@ -70,6 +70,7 @@ from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from .crossval import held_out_score
 from .reference import moved
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate
+from .screen import score_tests, screenable, screened_candidate, to_refit
 from .shapes import as_runs, shape_curvatures, shape_params
 
 log = logging.getLogger(__name__)
@@ -178,7 +179,8 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
 
 def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
             also: Mapping[str, float] | None = None,
-            on_done: Callable[[str], None] | None = None
+            on_done: Callable[[str], None] | None = None,
+            lkcs: Mapping[str, tuple[float, ...]] | None = None
             ) -> list[tuple[FitResult | None, GyrostandError | None, float,
                             tuple[float, ...]]]:
     """:func:`refit` of ``model + c`` for every candidate ``c``: (fit or None, the error
@@ -192,7 +194,8 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
     CPU time in all; wall clock ~1/CPUs of it on an idle machine). Each fit is the same
     deterministic computation whichever thread runs it: the results do not depend on the
     number of threads. BLAS is held to one thread around the pool (the algebra is on
-    tiny matrices; see :func:`~gyrostand.core.ml.fit.ml`).
+    tiny matrices; see :func:`~gyrostand.core.ml.fit.ml`). ``lkcs``: curvatures already
+    measured (by the score screen, :mod:`.screen`), by term.
     """
     def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float,
                                 tuple[float, ...]]:
@@ -204,7 +207,9 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
             return None, exc, time.perf_counter() - t0, ()
         seconds = time.perf_counter() - t0
         lkc: tuple[float, ...] = ()
-        if shaped:
+        if lkcs is not None and term in lkcs:
+            lkc = lkcs[term]
+        elif shaped:
             lkc = shape_curvatures(samples, model, base, term)
         if on_done is not None:
             with _DONE_LOCK:
@@ -236,16 +241,31 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
                     terms: list[str] | None = None,
                     also: Mapping[str, float] | None = None,
                     alpha: float = 0.05,
-                    on_done: Callable[[str], None] | None = None) -> list[Candidate]:
+                    on_done: Callable[[str], None] | None = None,
+                    screen: bool = True) -> list[Candidate]:
     """Refit ``model + c`` for each candidate ``c`` (started also from ``also``, see
     :func:`refit`); in :func:`ordered`'s order at ``alpha`` (Bonferroni over the
     candidates, as the verdict). ``on_done(term)``: called as each refit ends (a progress
-    count; from the refits' threads, one call at a time)."""
+    count; from the refits' threads, one call at a time). ``screen``: score-test the
+    candidates first and refit only those the test cannot rule out (:mod:`.screen`);
+    ``False`` refits them all."""
     n = base.n_observed
     out = []
     todo = list(terms if terms is not None else candidate_terms(model))
-    for term, (r, exc, seconds, lkc) in zip(todo, _refits(samples, model, base, todo, also,
-                                                          on_done), strict=True):
+    # screened only where the reference shows no lack of fit (``also`` None): see
+    # :mod:`.screen` for the misses measured otherwise
+    scores = score_tests(samples, model, base, [t for t in todo if screenable(
+        samples, model, t)]) if screen and not also else {}
+    keep = to_refit(scores)
+    fitted = [t for t in todo if t not in scores or t in keep]
+    for term in todo:
+        if term not in fitted:
+            out.append(screened_candidate(scores[term], base))
+            if on_done is not None:
+                on_done(term)
+    lkcs = {t: s.shape_lkc for t, s in scores.items()}
+    for term, (r, exc, seconds, lkc) in zip(fitted, _refits(samples, model, base, fitted,
+                                                            also, on_done, lkcs), strict=True):
         bigger = model.add(term)
         if r is None:
             log.warning("candidate %s could not be fitted: %s", term, exc)
@@ -278,6 +298,8 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
             seconds=seconds, result=r, identified=ident, at_bound=bound,
             stochastic=stochastic, note=note, test=test, shape_lkc=lkc, n_params=used,
             traded=moved(model, base, r.values, also) if not stochastic else (),
+            score_stat=scores[term].stat if term in scores else None,
+            score_p=scores[term].p_value if term in scores else None,
         ))
     return ordered(out, alpha / max(len(out), 1))
 

@@ -32,6 +32,10 @@ class Candidate:
     kind that explains the same failure, ``note`` says why one is not ranked, ``traded``
     names the random-part parameters its refit moved beyond ±3 std (the effect traded
     against the random part rather than explaining a failure of the deterministic one).
+    ``score_stat``/``score_p``: its score (LM) test at the current fit (:mod:`.screen`),
+    ``None`` for a candidate not screened; ``screened``: ruled out by that test and not
+    refitted (then ``lr_stat``, ``df``, ``p_value`` and ΔAIC/ΔBIC are the LM test's,
+    ``effect`` is empty and the candidate is not ranked).
     """
 
     term: str
@@ -54,10 +58,13 @@ class Candidate:
     shape_lkc: tuple[float, ...] = ()
     n_params: int | None = None
     traded: tuple[str, ...] = ()
+    score_stat: float | None = None
+    score_p: float | None = None
+    screened: bool = False
 
     @property
     def ranked(self) -> bool:
-        return self.identified and not self.at_bound
+        return self.identified and not self.at_bound and not self.screened
 
     def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
         return {
@@ -72,6 +79,8 @@ class Candidate:
             "competes": self.competes, "note": self.note, "test": self.test,
             "shape_lkc": list(self.shape_lkc), "n_params": self.n_params,
             "traded": list(self.traded),
+            "score_stat": self.score_stat, "score_p": self.score_p,
+            "screened": self.screened,
         }
 
 
@@ -129,3 +138,4 @@ TEST_CHI2 = "chi2"  # χ²(df)
 TEST_MIXTURE = "chi2 mixture"  # ½χ²(0) + ½χ²(df): the null on a boundary
 TEST_CHI2_EXTRA = "chi2 +1 df"  # χ²(df), df with one more for a parameter unidentified
 TEST_SUP = "sup over shape"  # the supremum of a χ²(df) process over the shape (EC/Davies)
+TEST_SCORE = "score test"  # a screened candidate's LM statistic (:mod:`.screen`)

@@ -6,6 +6,7 @@ shape (:func:`~gyrostand.core.chisq.sup_chi2_sf`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -49,7 +50,8 @@ def shape_params(model: Model, term: str) -> tuple[str, ...]:
     return tuple(n for n in shapes if n in model.param_names)
 
 
-def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
+def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str,
+                     seen: Callable[[np.ndarray], None] | None = None
                      ) -> tuple[float, ...]:
     """The Lipschitz–Killing curvatures of ``term``'s shape range in the metric of its
     score process under the current model (the null), for :func:`~.chisq.sup_chi2_sf`.
@@ -57,7 +59,7 @@ def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
     At the null fit, the LR of the coefficient at a fixed shape θ is asymptotically Z(θ)²,
     Z(θ) the efficient score x(θ)'ε / √(x(θ)'M x(θ)): ε the whitened innovations (iid
     N(0, 1)), x(θ) the term's regressor through the current model's Kalman filter,
-    whitened, and M the metric of :func:`_efficient_metric` (the current parameters
+    whitened, and M the metric of :func:`efficient_metric` (the current parameters
     readjust with the candidate). As a Gaussian process Z(θ) = u(θ)'ε with
     u(θ) = √M x(θ) / ‖√M x(θ)‖; the curvatures are those of the curve (or surface) u(θ)
     on the unit sphere: its length (L₁); half its boundary's length (L₁) and its area
@@ -65,9 +67,11 @@ def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
     Measured on clean 2-h cycles: Z(3 s)² of temp_rate 1.36, 2.29, 1.14 against its refit
     LR at τ = 3 s of 1.35, 2.38, 1.19. θ spans the refit's own search range (:class:`~gyrostand.core.ml.fit.Problem`'s
     bounds) on a log grid (:data:`SHAPE_POINTS`, :data:`SHAPE_POINTS_2D`).
+    ``seen(U)``: called with each block of grid columns u(θ) as it is made (the score
+    screen, :mod:`.screen`, takes Z(θ) = u(θ)'ε from the same pass).
     """
     with threadpool_limits(limits=1, user_api="blas"):  # tiny algebra: see ml.ml
-        return _shape_curvatures(samples, model, base, term)
+        return _shape_curvatures(samples, model, base, term, seen)
 
 
 def as_runs(samples: Samples | tuple[Samples, ...]) -> tuple[Samples, ...]:
@@ -136,7 +140,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         for j, n in enumerate(part[6]):
             T[row:row + m, cols.index(n)] = part[5][:, j]
         row += m
-    K, d = _efficient_metric(T, cols, base)
+    K, d = efficient_metric(T, cols, base)
 
     def unit(zs: list[tuple[float, ...]]) -> np.ndarray:
         """u(θ) at the log shape values ``zs``: (observed samples, len(zs)); a regressor
@@ -193,8 +197,8 @@ def mean_tangents(model: Model, p: Any, ctx: Any) -> tuple[list[str], np.ndarray
     return names, (np.column_stack(cols) if cols else np.zeros((ctx.t.size, 0)))
 
 
-def _efficient_metric(T: np.ndarray, names: list[str], base: Any
-                      ) -> tuple[np.ndarray | None, np.ndarray]:
+def efficient_metric(T: np.ndarray, names: list[str], base: Any
+                     ) -> tuple[np.ndarray | None, np.ndarray]:
     """``(K, d)`` with ``c − K (d ⊙ K'c)`` = √M c, M = I − T V T': the metric of the
     efficient score of a candidate's coefficient. ``T``: the whitened mean tangents,
     ``V``: the current fit's covariance of those parameters (the inverse of the whole
@@ -218,9 +222,20 @@ def _efficient_metric(T: np.ndarray, names: list[str], base: Any
     return Q @ W, 1.0 - np.sqrt(1.0 - lam)
 
 
-def _shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
+_efficient_metric = efficient_metric  # the name tests/workbench/test_calibrated_candidates uses
+
+
+def _shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str,
+                      seen: Callable[[np.ndarray], None] | None = None
                       ) -> tuple[float, ...]:
     axes, unit = shape_grid(samples, model, base, term)
+    if seen is not None:
+        made = unit
+
+        def unit(zs: list[tuple[float, ...]]) -> np.ndarray:
+            U = made(zs)
+            seen(U)
+            return U
 
     def dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.clip(np.einsum("ij,ij->j", a, b), -1.0, 1.0)

@@ -171,8 +171,10 @@ def redundant_terms(samples: Samples, model: Model, fit: FitResult, alpha: float
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
              alpha: float = 0.05, terms: list[str] | None = None,
              unit: str = DRIFT_UNIT,
-             on_candidate: Callable[[str], None] | None = None) -> DiagnoseResult:
-    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates.
+             on_candidate: Callable[[str], None] | None = None,
+             screen: bool = True) -> DiagnoseResult:
+    """Fit ``model`` by ML (unless ``base`` is given), diagnose it, rank the candidates
+    (``screen``: refit only those a score test cannot rule out, :mod:`.screen`).
 
     A significant candidate whose effect is not identified sends the current model back to
     a refit from that candidate's optimum; if the current fit rises, every candidate is
@@ -199,7 +201,7 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
             early = side.submit(checks, first, samples, unit, ref)
         for _ in range(3):
             cands = rank_candidates(samples, model, fit, terms, also=_also(ref), alpha=alpha,
-                                    on_done=on_candidate)
+                                    on_done=on_candidate, screen=screen)
             m = max(len(cands), 1)
             alpha_each = alpha / m
             better = refit_from_candidates(samples, model, fit, cands, alpha_each)
