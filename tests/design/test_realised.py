@@ -10,6 +10,7 @@ from gyrostand.core.design.realised import (
     bootstrap_ratio,
     expected_gain,
     gain_words,
+    ratio,
     realised_lr_gain,
     realised_std_gain,
 )
@@ -89,3 +90,24 @@ def test_design_json_names_the_units_of_its_numbers(tmp_path):
     assert units["parameters"] == {"markov.beta": "1/s", "markov.sigma": "y",
                                    "temp.gamma": "y/(s·°C)", "white.sigma": "y"}
     assert (units["time"], units["temperature"]) == ("s", "degC")
+
+
+def test_a_resample_without_spread_does_not_stop_the_interval():
+    # design --verify 4 crashed (ZeroDivisionError): a bootstrap resample of a few runs
+    # can repeat one run, whose spread is 0. Its ratio is infinite, kept as an order
+    # statistic; the point estimate stays the plain ratio.
+    designed = {"k": [1.0, 1.1, 0.9]}
+    reference = {"k": [1.0, 1.4, 0.6]}
+    got = realised_std_gain(designed, reference, ["k"], {"k": 1.0})
+    assert got["ratio"] == pytest.approx(np.std([1.0, 1.4, 0.6], ddof=1)
+                                         / np.std([1.0, 1.1, 0.9], ddof=1))
+    lo, hi = got["interval"]
+    # 3 runs: 3 of 27 resamples repeat one run (1/9 > 2.5 % of the draws): the
+    # reference's give ratio 0, the designed's inf -- with 3 runs nothing is excluded
+    assert (lo, hi) == (0.0, np.inf)
+    # 4 runs: 4 of 256 (1.6 %) -- both ends finite again
+    got4 = realised_std_gain({"k": [1.0, 1.1, 0.9, 1.05]}, {"k": [1.0, 1.4, 0.6, 1.2]},
+                             ["k"], {"k": 1.0})
+    assert 0 < got4["interval"][0] < got4["ratio"] < got4["interval"][1] < np.inf
+    assert ratio(0.0, 0.0) != ratio(0.0, 0.0)  # nan
+    assert ratio(-1.0, 0.0) == -np.inf and ratio(3.0, 2.0) == 1.5

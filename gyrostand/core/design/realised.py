@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MIN_EXPECTED_LR", "expected_gain", "gain_words", "bootstrap_ratio",
+__all__ = ["MIN_EXPECTED_LR", "expected_gain", "gain_words", "bootstrap_ratio", "ratio",
            "realised_lr_gain", "realised_std_gain"]
 
 #: the smallest expected LR a ratio of expected LRs is quoted over (a 1-dof χ² test's LR
@@ -54,17 +54,31 @@ def bootstrap_ratio(stat: Callable[[Groups], float], num: Groups, den: Groups, *
     """``stat(num) / stat(den)`` and its percentile interval at ``level``: each group (an
     array whose rows are runs) resampled with replacement, ``n_boot`` times."""
     rng = np.random.default_rng(seed)
-    value = stat(num) / stat(den)
+    value = ratio(stat(num), stat(den))
 
     def resample(groups: Groups) -> list[np.ndarray]:
         return [g[rng.integers(0, len(g), len(g))] for g in groups]
 
-    boot = np.array([stat(resample(num)) / stat(resample(den)) for _ in range(n_boot)])
-    boot = boot[np.isfinite(boot)]
+    boot = np.array([ratio(stat(resample(num)), stat(resample(den))) for _ in range(n_boot)])
+    boot = boot[~np.isnan(boot)]
     if boot.size == 0:
-        return float(value), float("nan"), float("nan")
-    lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
-    return float(value), float(lo), float(hi)
+        return value, float("nan"), float("nan")
+    q = [(1 - level) / 2, (1 + level) / 2]
+    if np.isinf(boot).any():
+        # a resample of a few runs can repeat one run: its spread is 0 and the ratio
+        # infinite; quantiles then pick order statistics (no inf - inf interpolation)
+        lo, hi = np.quantile(boot, q, method="inverted_cdf")
+    else:
+        lo, hi = np.quantile(boot, q)
+    return value, float(lo), float(hi)
+
+
+def ratio(a: float, b: float) -> float:
+    """a / b, +-inf for a nonzero a over 0 and nan for 0 / 0 (a bootstrap resample of a
+    few runs can have no spread at all)."""
+    if b != 0:
+        return float(a) / float(b)
+    return float("nan") if a == 0 or np.isnan(a) else float(np.copysign(np.inf, a))
 
 
 def _interval(value: float, lo: float, hi: float, runs: int) -> dict[str, Any]:
