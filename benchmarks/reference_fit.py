@@ -85,7 +85,7 @@ def main() -> None:
                   f"(null mean {FREE_LR_SCALE * df:.1f}), p < {REPORT_ALPHA:g} in "
                   f"{int(np.sum(p_a < REPORT_ALPHA))}, p < {LACK_OF_FIT_ALPHA:g} in "
                   f"{int(np.sum(p_a < LACK_OF_FIT_ALPHA))}; reference {np.mean(sec):.2f} s")
-        for kind in HIDDEN:
+        for kind in HIDDEN if n_hidden else ():
             hit = hit1 = 0
             groups: dict[str, int] = {}
             t0 = time.perf_counter()
