@@ -12,7 +12,9 @@
 * 73 ``CANTCREAT``: an output file or folder cannot be created (no permission, a file
   where a folder should be, an existing file without ``--force``);
 * 74 ``IOERR``: a write failed: disk full, file too large, I/O error, the run folder
-  removed while written;
+  removed while written; or frames received were lost before they were binned (the
+  decoded-sample buffer, ``sampling.buffer``, overflowed): the run went on and ended,
+  its folder is complete but for those samples;
 * 78 ``CONFIG``: the session file, its DBC or its mapping is wrong; ``run --check``
   refuses it;
 * 130: Ctrl-C (128 + SIGINT, the shell's convention).
@@ -65,7 +67,8 @@ UNAVAILABLE = 69
 SOFTWARE = 70
 #: an output file or folder cannot be created
 CANTCREAT = 73
-#: a write failed: disk full, file too large, I/O error, folder removed mid-run
+#: a write failed: disk full, file too large, I/O error, folder removed mid-run; or
+#: frames received were lost before they were binned (the sample buffer overflowed)
 IOERR = 74
 #: the session file, its DBC or its mapping is wrong (``run --check`` refuses it)
 CONFIG = 78
@@ -82,7 +85,8 @@ MEANING: dict[int, tuple[str, str]] = {
                                  "the command needs is missing"),
     SOFTWARE: ("SOFTWARE", "internal error (a bug: please report it)"),
     CANTCREAT: ("CANTCREAT", "an output file or folder cannot be created"),
-    IOERR: ("IOERR", "a write failed (disk full, I/O error, folder removed)"),
+    IOERR: ("IOERR", "a write failed (disk full, I/O error, folder removed), "
+                     "or received frames were lost (sample buffer full)"),
     CONFIG: ("CONFIG", "the session file, DBC or mapping is wrong"),
     INTERRUPTED: ("INTERRUPTED", "interrupted (Ctrl-C)"),
 }

@@ -220,6 +220,20 @@ def decoded_nothing(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str |
             f"are {mapped}" + (f"; ids seen most: {seen}" if seen else "") + f"; {kept}")
 
 
+def lost_received(outcome: RunOutcome, cfg: SessionConfig, what: str) -> str | None:
+    """Why a run (``what``: ``replay``, ``run``) lost frames it had received, in one line:
+    decoded samples dropped because the sample buffer was full (``overflow``); None when
+    it lost none. The run's folder is complete but for those samples."""
+    dec = outcome.stats.get("decoder", {})
+    n = dec.get("rejected", {}).get("overflow", 0)
+    if not n:
+        return None
+    return (f"{what} lost {n:,} of {dec.get('received', 0):,} received frames: decoded "
+            f"samples dropped because the sample buffer (sampling.buffer = "
+            f"{cfg.sampling.buffer:,}) was full; their bins lack them (run.log has when); "
+            f"a larger sampling.buffer keeps them; the run folder is kept: {outcome.run_dir}")
+
+
 def whole(minimum: int = 0) -> Callable[[str], int]:
     """An argparse ``type``: a whole number >= ``minimum``; anything else is a usage error
     naming the argument (exit status 64)."""

@@ -19,6 +19,7 @@ from .common import (
     add_format_args,
     decoded_nothing,
     fault_status,
+    lost_received,
     number,
     print_outcome,
     with_data_formats,
@@ -105,4 +106,9 @@ def run(args: argparse.Namespace) -> int:
     faults = [o for o in outcomes if not o.ok]
     for o in faults:  # e.g. the disk filled: a fault, named with its folder
         print(f"error: {o.run_dir}: {o.stop_reason}", file=sys.stderr)
-    return fault_status(faults[0]) if faults else exitcodes.OK
+    if faults:
+        return fault_status(faults[0])
+    lost = [why for o in outcomes if (why := lost_received(o, cfg, "replay"))]
+    for why in lost:
+        print(f"error: {why}", file=sys.stderr)
+    return exitcodes.IOERR if lost else exitcodes.OK

@@ -14,6 +14,7 @@ from .common import (
     add_format_args,
     decoded_nothing,
     fault_status,
+    lost_received,
     number,
     print_outcome,
     progress,
@@ -81,7 +82,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {empty}", file=sys.stderr)
         return (exitcodes.DATAERR if outcome.stats["decoder"].get("received")
                 else exitcodes.UNAVAILABLE)
-    return exitcodes.OK if outcome.ok else fault_status(outcome)
+    if not outcome.ok:
+        return fault_status(outcome)
+    lost = lost_received(outcome, cfg, "run")
+    if lost is not None:  # the run went on, but frames it had received were dropped
+        print(f"error: {lost}", file=sys.stderr)
+        return exitcodes.IOERR
+    return exitcodes.OK
 
 
 def describe_session(cfg: SessionConfig) -> str:
