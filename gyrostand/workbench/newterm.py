@@ -21,7 +21,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.diagnose.formula import SUPPORTED, Formula, sparse_formula
+from ..core.diagnose.formula import SUPPORTED, Formula, score_formula
 from ..core.diagnose.reference import Partial, reference_fit
 from ..core.ml.fit import ml
 from ..errors import ConfigError, DataError, OutputError
@@ -129,7 +129,7 @@ def new_term(subject: Subject, name: str, out: Path | None = None,
             + ("; the missing shape is in dT/dt: the vocabulary's rate terms cover it"
                if ref.significant else "") + "): there is no missing shape to write")
     q = missing[0]
-    f = sparse_formula(q)
+    f = score_formula(q, subject.samples, subject.model, fit)
     folder = Path(out) if out is not None else _default_folder(subject, name)
     module = folder / f"gyrostand_{name}.py"
     if module.exists() and not force:

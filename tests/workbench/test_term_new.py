@@ -98,3 +98,27 @@ def test_the_next_line_of_an_effect_outside_the_vocabulary_is_term_new():
 
     assert term_new_command("/v/bin/gyrostand fit '/runs/a b' --gyro az") == \
         "/v/bin/gyrostand term new --from '/runs/a b' --gyro az"
+
+
+def test_after_temp2_the_formula_is_the_shape_beyond_it(tmp_path, capsys):
+    # a cubic in T: the workbench adds temp2 (its quadratic part) first, then shows the
+    # rest outside the vocabulary. The formula is chosen by the score of each library
+    # form at the current fit (temp2 readjusting), so it is the cubic alone, and its
+    # coefficient the cubic's leading one (invariant to the centre): a·S³. Fitted to the
+    # reference's partial-effect curve instead it was two steps (the curve's band as wide
+    # as the curve, its T basis nearly collinear with T²).
+    s = simulate(Model.parse("markov,temp,bias"), BASE, chamber_profile(3.0), seed=11)
+    rng = np.random.default_rng(3)
+    a = 6e-5
+    drift = s.drift + a * (s.temp - 32.0) ** 3
+    temp = np.round((s.temp + 0.01 * rng.standard_normal(len(s))) / 0.05) * 0.05
+    csv = tmp_path / "cubic.csv"
+    Samples.from_arrays(s.t, drift, temp).to_csv(csv)
+    assert main(["term", "new", "--from", str(csv), "--name", "cubic_u",
+                 "--model", "markov,temp,bias,temp2"]) == 0
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("formula:")][0]
+    g = line.split("g = ")[1].split(" (normalised")[0]
+    assert g.count("·") == 1 and g.endswith("^3"), line  # one form: the cubic
+    coef = float(g.split("·")[0])
+    half = float(g.split("/")[1].split(")")[0])
+    assert abs(coef) == pytest.approx(a * half ** 3, rel=0.15), (line, a * half ** 3)

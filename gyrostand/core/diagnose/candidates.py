@@ -403,8 +403,13 @@ def _held_out(samples: Samples, model: Model, c: Candidate, cache: dict[str, flo
 
 def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candidate,
                         alpha_each: float) -> bool:
-    """Whether ``st`` explains the failure and ``d`` does not once ``st`` is in the model:
-    both fitted together, each tested given the other."""
+    """Whether ``d`` is not significant once ``st`` is in the model (both fitted together,
+    each tested given the other): ``st`` explains the failure as well as ``d`` does, or
+    better (``st`` significant given ``d``). Where neither is significant given the other
+    they explain the same failure and the data before the nested test cannot tell them
+    apart: the held-out blocks decide (:func:`_random_explains_better`). Measured on a
+    hidden rate random walk (4-h cycles, seed 500) trend and random_walk were each not
+    significant given the other (p 1, 0.5); the trend went first, the walk then LR 0."""
     both = model.add(d.term, st.term)
     try:
         assert d.result is not None
@@ -426,15 +431,14 @@ def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candid
         p_s *= 0.5
     log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
              d.term, st.term, p_d, st.term, d.term, p_s)
-    return p_d >= alpha_each and p_s < alpha_each
+    return p_d >= alpha_each
 
 
 def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
                             alpha_each: float, cache: dict[str, float]) -> bool:
     """Whether the stochastic candidate ``st`` goes before the deterministic ``d``: only
     when both kinds of evidence say so — fitted together, ``d`` is not significant given
-    ``st`` while ``st`` is given ``d`` (:func:`_nested_says_random`), and ``st`` predicts
-    held-out blocks better (:mod:`.crossval`: each refitted without the block, the block's
+    ``st`` (:func:`_nested_says_random`), and ``st`` predicts held-out blocks better (:mod:`.crossval`: each refitted without the block, the block's
     log predictive density given the data before it). The held-out score alone put a
     random walk first on a warm-up with a T² effect (each deterministic term alone
     leaves the other's structure, which a walk absorbs); a random walk proposed after a

@@ -41,7 +41,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -57,8 +57,8 @@ from ..validate import prepare
 from .results import TEST_SCORE, TEST_SUP, Candidate
 from .shapes import efficient_metric, mean_tangents, shape_curvatures, shape_grid, shape_params
 
-__all__ = ["SCREEN_P", "SCREEN_TOP", "Score", "score_tests", "screenable",
-           "screened_candidate", "to_refit"]
+__all__ = ["SCREEN_P", "SCREEN_TOP", "Score", "efficient_columns", "score_tests",
+           "screenable", "screened_candidate", "to_refit"]
 
 #: a candidate whose score p-value is below this is refitted (conservative — the LM ran
 #: to a third of the LR, LM p 0.38 for a refit's p 0.009 — because a screen
@@ -169,6 +169,20 @@ def _linear_score(used: Samples, model: Model, base: FitResult | _Point, term: s
     b = C.T @ eps
     sol, *_ = np.linalg.lstsq(C.T @ C, b, rcond=1e-12)
     return max(float(b @ sol), 0.0), X.shape[1]
+
+
+def efficient_columns(samples: Samples, model: Model, base: FitResult,
+                      make: Callable[[Samples], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(C, ε): the columns ``make(used)`` ((N, k) regressors on the samples the fit uses)
+    through the current model's filter at ``base``, whitened and efficient (√M: the current
+    parameters readjust), and the whitened innovations; the score statistic of any subset
+    J of them is ε'C_J(C_J'C_J)⁻¹C_J'ε (the forms of :func:`~.formula.score_formula`)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        used, ok, scale, eps, K, d = _whitened(samples, model, base)
+        C = model.filter_columns(base.values, used, make(used))[0][ok, 1:] * scale[:, None]
+        if K is not None:
+            C -= K @ (d[:, None] * (K.T @ C))
+    return C, eps
 
 
 def _regressors(bigger: Model, term: str, vals: dict[str, float], ctx: object
