@@ -46,7 +46,9 @@ def run(args: argparse.Namespace) -> int:
           f"df, p = {q.p_value:.2g}; the model's lack of fit p = {out.lack_of_fit_p:.2g})")
     print(f"formula: a · g({f.variable}), g = "
           + " ".join(f"{c:+.4g}·{n}" for (n, _), c in zip(f.forms, f.coef, strict=True))
-          + f" (normalised to peak 1); R² {f.r2:.3f}; a ≈ {f.amplitude:.4g} {subject.unit}")
+          + " (normalised to peak 1); "
+          + (f"score LM {f.score:.1f} at the current fit, " if f.score is not None else "")
+          + f"R² {f.r2:.3f} of the reference's curve; a ≈ {f.amplitude:.4g} {subject.unit}")
     print(f"wrote {out.module}")
     print(f"      {out.folder / 'pyproject.toml'}")
     fit = workbench_command(args, "fit")

@@ -56,7 +56,8 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
     assert main(["term", "new", "--from", str(csv), "--name", "cubic_t"]) == 0
     out = capsys.readouterr().out
     assert "partial effect of T" in out, out
-    r2 = float(out.split("R² ")[1].split(";")[0])
+    r2 = float(out.split("R² ")[1].split(" ")[0])
+    assert "score LM" in out, out
     assert r2 > 0.9, out
     pkg = tmp_path / "gyrostand-cubic-t"
     assert (pkg / "gyrostand_cubic_t.py").is_file() and (pkg / "pyproject.toml").is_file()

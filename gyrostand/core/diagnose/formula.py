@@ -54,7 +54,8 @@ class Formula:
     ``forms``: (name, Python expression in ``x`` — the variable's numpy array — as a
     generated term writes it); ``amplitude``: the drift's change at the peak (drift unit);
     ``r2``: the share of the partial effect's weighted variation (around its constant and
-    linear part) the formula explains."""
+    linear part) the formula explains; ``score``: the LM statistic of the forms at the
+    current fit when the data chose them (:func:`score_formula`), else None."""
 
     variable: str
     forms: tuple[tuple[str, str], ...]
@@ -62,6 +63,7 @@ class Formula:
     peak: float
     amplitude: float
     r2: float
+    score: float | None = None  # the chosen forms' score statistic (score_formula)
 
     def expression(self) -> str:
         """The shape g(x) as one Python expression in ``x`` (``np`` is numpy)."""
@@ -173,11 +175,11 @@ def score_formula(q: Partial, samples: Samples, model: Model, base: FitResult) -
     best1 = max(ones, key=lambda k: ones[k][0])
     best2 = max(pairs, key=lambda k: pairs[k][0]) if pairs else best1
     pick = best2 if (ones | pairs)[best2][0] > ones[best1][0] + PAIR_LM else best1
-    _, coef = (ones | pairs)[pick]
+    stat, coef = (ones | pairs)[pick]
     curve = _curve_fit(q, lib)
     base_rss, _ = curve(())
     shape = sum(c * lib[i][2](q.x) for c, i in zip(coef, pick, strict=True))
     peak = float(shape[np.argmax(np.abs(shape))])
     return Formula(variable=q.variable, forms=tuple((lib[i][0], lib[i][1]) for i in pick),
                    coef=tuple(float(c) for c in coef), peak=peak, amplitude=peak,
-                   r2=1.0 - curve(pick)[0] / base_rss if base_rss > 0 else 0.0)
+                   r2=1.0 - curve(pick)[0] / base_rss if base_rss > 0 else 0.0, score=stat)
