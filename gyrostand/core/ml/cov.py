@@ -121,8 +121,23 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
-    for _ in range(max(1, passes)):
-        H = hessian(ll, x0, h, evaluate)
+    B: np.ndarray | None = None  # principal axes of a previous pass (x = x0 + B u)
+    hu = h
+    prev: np.ndarray | None = None  # the last covariance without a clipped direction
+    for _ in range(max(1, passes) + 1):
+        if _ == max(1, passes) and B is None:
+            break  # the extra pass is only for a retry along the axes
+        if B is None:
+            H = hessian(ll, x0, h, evaluate)
+        else:
+            # along the previous covariance's principal axes, 0.1 std each (a step in
+            # whitened coordinates): on a narrow curved ridge (β–γ, correlation 0.9997)
+            # coordinate steps of 0.1 std each cross the ridge's curvature and the
+            # Hessian came out indefinite — a 'flat' warning where ML's own profile
+            # deviance rises by 12-14 within the band (chamber hour, seed 5061)
+            Hu = hessian(lambda u, B=B: ll(x0 + B @ u), np.zeros(x0.size), hu, evaluate)
+            Binv = np.linalg.inv(B)
+            H = Binv.T @ Hu @ Binv
         if not np.all(np.isfinite(H)):
             H = np.nan_to_num(H, nan=0.0, posinf=0.0, neginf=0.0)
         inner = [i for i, n in enumerate(free) if n not in at_bound]
@@ -141,4 +156,38 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
                 new_h[i] = min(new_h[i], 0.1 * max(abs(x0[i]), 0.1 * noise_scale))
             new_h[i] = max(new_h[i], 1e-9 * max(abs(x0[i]), 1e-12))
         h = new_h
+        if warnings and B is None and prev is not None:
+            # clipped after coordinate steps: once more along the principal axes of the
+            # last covariance that had none (a narrow curved ridge, not a flat direction)
+            B, hu = _axes(prev, inner, h, x0, [prob.kind(n) in POSITIVE_KINDS for n in free])
+            if B is not None:
+                continue
+        if not warnings:
+            prev = cov
     return cov, warnings
+
+
+def _axes(cov: np.ndarray, inner: list[int], h: np.ndarray, x0: np.ndarray,
+          positive: list[bool]) -> tuple[np.ndarray | None, np.ndarray]:
+    """(B, hu): the next pass's step directions and sizes, x = x0 + B u. The interior
+    parameters along their covariance's principal axes (B's block U√S, u-steps of 0.1, made
+    smaller where a positive parameter would come within half its value of 0); a parameter
+    at a bound along its own coordinate (step ``h``). None where the covariance has a
+    clipped (flat) direction: the coordinate steps ``h`` then, as before."""
+    n = x0.size
+    sub = cov[np.ix_(inner, inner)]
+    if not inner or not np.all(np.isfinite(sub)):
+        return None, h
+    lam, U = np.linalg.eigh(0.5 * (sub + sub.T))
+    if lam.min() <= 0 or lam.max() / lam.min() > 1e14:
+        return None, h
+    B = np.diag(np.where(np.isin(np.arange(n), inner), 0.0, 1.0))
+    B[np.ix_(inner, inner)] = U * np.sqrt(lam)
+    hu = np.where(np.isin(np.arange(n), inner), 0.1, h)
+    # a positive parameter must stay positive at every point of the stencil (two axes)
+    reach = 2.0 * np.abs(B) @ np.where(np.isin(np.arange(n), inner), 0.1, 0.0)
+    for i in inner:
+        if positive[i] and reach[i] > 0.5 * abs(x0[i]):
+            hu[inner] *= 0.5 * abs(x0[i]) / reach[i]
+            reach *= 0.5 * abs(x0[i]) / reach[i]
+    return B, hu
