@@ -47,3 +47,40 @@ def test_a_truly_flat_likelihood_is_still_called_flat():
     sd = r.std("markov.beta")
     assert any("flat" in w for w in r.warnings) or not np.isfinite(sd) or \
         sd > r.values["markov.beta"], (r.warnings, sd)
+
+
+def _fit_numbers(seed: int) -> str:
+    """Every number of the seed's chamber-hour fit, to the last bit (repr)."""
+    s = simulate(MODEL, TRUTH, chamber_profile(1.0), duration=3600.0, seed=seed)
+    r = ml(s, MODEL)
+    return repr((r.loglik, sorted(r.values.items()),
+                 sorted((n, r.std(n)) for n in r.values), r.warnings))
+
+
+_CHILD = ("import sys; sys.path.insert(0, {tests!r}); "
+          "from core.test_ml_ridge import _fit_numbers; print(_fit_numbers(5061))")
+
+
+def test_the_same_fit_gives_the_same_numbers_in_any_thread_and_process():
+    # the brief of #24 item 6 reported ML 'flat' inside pytest and 'beta at its upper bound'
+    # alone on the same hour: a fit must not depend on the process, the thread it runs in
+    # (the main thread evaluates on a pool, a worker thread one point after the other) or
+    # the hash seed (set order)
+    import os
+    import subprocess
+    import sys
+    import threading
+    from pathlib import Path
+
+    first = _fit_numbers(5061)
+    assert _fit_numbers(5061) == first
+    got: list[str] = []
+    t = threading.Thread(target=lambda: got.append(_fit_numbers(5061)))
+    t.start()
+    t.join()
+    assert got == [first]
+    tests = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    out = subprocess.run([sys.executable, "-c", _CHILD.format(tests=tests)], env=env,
+                         capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == first
