@@ -94,11 +94,11 @@ def triad_dict(frames: int, out: Path, layout: str = "ours") -> dict:
 BARE_LOOP = "import can, sys\nfor msg in can.LogReader(sys.argv[1]):\n    pass\n"
 
 
-def _child(argv: list[str]) -> tuple[float, float]:
+def _child(argv: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
     """Wall and CPU (user + sys) s of one command in a fresh process."""
     before = os.times()
     t = time.perf_counter()
-    p = subprocess.run(argv, capture_output=True, text=True)
+    p = subprocess.run(argv, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t
     after = os.times()
     if p.returncode != 0:
@@ -107,7 +107,8 @@ def _child(argv: list[str]) -> tuple[float, float]:
                   + after.children_system - before.children_system)
 
 
-def whole_command(layout: str, frames: int, path: Path, out: Path, pairs: int) -> None:
+def whole_command(layout: str, frames: int, path: Path, out: Path, pairs: int,
+                  bytecode_cache: bool = True) -> None:
     """The whole ``gyrostand replay`` command (a fresh process: imports, stream, final
     fits, result.json, report.txt) against the bare ``for msg in can.LogReader(path)``
     loop in a fresh process, in turn, ``pairs`` times: the ratio bare/whole pair by pair
@@ -117,9 +118,21 @@ def whole_command(layout: str, frames: int, path: Path, out: Path, pairs: int) -
     replay_cmd = [sys.executable, "-m", "gyrostand", "-q", "replay", str(cfg_path),
                   str(path), "--out", str(out / "whole")]
     bare_cmd = [sys.executable, "-c", BARE_LOOP, str(path)]
-    _child(bare_cmd)  # warm: the file in the page cache, numba's kernels in their cache
-    _child(replay_cmd)
-    rows = [(*_child(bare_cmd), *_child(replay_cmd)) for _ in range(pairs)]
+    # Both commands with their modules' bytecode cached, as in an installed package (pip
+    # compiles it): with PYTHONDONTWRITEBYTECODE set (this machine's environment) an
+    # editable install's own modules are compiled from source at every start (~0.5 s of
+    # CPU for gyrostand's ~110 modules on the replay path) while python-can's come from
+    # site-packages' .pyc files. The cache goes to a folder of its own (no __pycache__ in
+    # the source tree); the warm-up runs fill it. --no-bytecode-cache: as the environment is.
+    env = None
+    if bytecode_cache:
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        env["PYTHONPYCACHEPREFIX"] = str(out / "pycache")
+    print(f"  ({'bytecode cached' if bytecode_cache else 'bytecode as the environment has it'}"
+          f"; PYTHONDONTWRITEBYTECODE={os.environ.get('PYTHONDONTWRITEBYTECODE', '')!r} here)")
+    _child(bare_cmd, env)  # warm: the file in the page cache, numba's kernels in their cache
+    _child(replay_cmd, env)
+    rows = [(*_child(bare_cmd, env), *_child(replay_cmd, env)) for _ in range(pairs)]
     for bw, bc, rw, rc in rows:
         print(f"  pair: bare loop {bw:6.2f} s wall {bc:5.2f} s CPU; whole replay {rw:6.2f} s "
               f"wall {rc:5.2f} s CPU: {bw / rw:.2f}x by wall, {bc / rc:.2f}x by CPU")
@@ -294,6 +307,9 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--layout", choices=("ours", "foreign", "both"), default="both")
+    ap.add_argument("--no-bytecode-cache", action="store_true",
+                    help="with --whole: the children as the environment has them (no "
+                         "bytecode written when PYTHONDONTWRITEBYTECODE is set)")
     ap.add_argument("--whole", type=int, default=0, metavar="PAIRS",
                     help="only the whole command against the bare loop, PAIRS pairs each")
     args = ap.parse_args()
@@ -304,7 +320,7 @@ def main() -> None:
     for layout in (("ours", "foreign") if args.layout == "both" else (args.layout,)):
         if args.whole:
             whole_command(layout, args.frames, log_of(layout, args.frames, out), out,
-                          args.whole)
+                          args.whole, bytecode_cache=not args.no_bytecode_cache)
         else:
             measure(layout, args.frames, args.repeat, out)
         print()

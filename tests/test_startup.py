@@ -8,6 +8,7 @@ core's heavy dependencies, and ``identify`` must not import those it does not us
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -120,3 +121,22 @@ def test_the_core_package_exports_what_it_did():
 def test_the_light_names_are_the_core_s_names():
     assert VOCABULARY == tuple(TERMS)  # same names, same (PRODUCT.md) order
     assert sorted(METHODS) == sorted(REGISTRY)
+
+
+def test_replay_of_a_blf_imports_python_can_without_asammdf(tmp_path):
+    """python-can's MF4 support (asammdf, pandas: ~0.5 s) stays off a BLF replay's import
+    path; the replay still ends in a run folder, and asammdf is importable afterwards."""
+    root = Path(__file__).resolve().parents[1]
+    argv = ["-q", "replay", str(root / "configs" / "demo.yaml"),
+            str(root / "tests" / "data" / "runfolder" / "replay.blf"), "--out", str(tmp_path)]
+    code = ("import contextlib, io\n"
+            "from gyrostand.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    assert main({argv!r}) == 0\n"
+            "import sys\n"
+            "heavy_before = sorted(m for m in ('can', 'asammdf', 'pandas') if m in sys.modules)\n"
+            "assert heavy_before == ['can'], heavy_before\n"
+            "import asammdf\n")
+    assert loaded_after(code, ("can", "asammdf", "pandas", "cantools")) == \
+        ["asammdf", "can", "cantools", "pandas"]
+    assert len(list(tmp_path.glob("*/*/samples.csv"))) == 1
