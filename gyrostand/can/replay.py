@@ -35,7 +35,16 @@ from gyrostand.can.logs.read import LogDamage, read_log, read_logs, read_logs_ar
 from gyrostand.can.logs.reader import ReaderProcess, array_batches
 
 __all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage",
-           "per_frame_forced"]
+           "per_frame_forced", "FILE_PUMP", "PUMP"]
+
+#: frames between pumps of a replay of log files as fast as possible, when the caller
+#: names none: the array path pays per batch (~0.7 ms of numpy calls), so 8192 frames
+#: (~8 s of a 3-gyro stand) receive a 1 M-frame BLF in ~0.33 s of CPU where 1024 took
+#: ~0.68 s (benchmarks/results/replay_whole_command.txt); bins do not depend on where the
+#: pumps fall (a bin closes on the next sample of its gyro)
+FILE_PUMP = 8192
+#: frames between pumps otherwise (frames given as messages, or paced by ``realtime``)
+PUMP = 1024
 
 #: log files (in total) at least this large are parsed in a reader process when
 #: ``parallel`` is None; below it the process start (~0.2 s) is not worth it
@@ -70,14 +79,15 @@ def per_frame_forced() -> bool:
 
 def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
            ingest: Ingest, listeners: Sequence[can.Listener] = (), *,
-           realtime: bool = False, speed: float = 1.0, pump_every: int = 1024,
+           realtime: bool = False, speed: float = 1.0, pump_every: int | None = None,
            parallel: bool | None = None, damage: LogDamage | None = None,
            arrays: bool | None = None) -> Iterator[list[Bin]]:
     """Feed frames (or the frames of a log file, or of several read one after the other)
     to ``ingest.listener`` and ``listeners``; yield the bins that close, batch by batch,
     and at the end the flushed last bins.
 
-    ``pump_every`` frames between pumps, at most what the listener's FIFO always holds
+    ``pump_every`` frames between pumps (None: :data:`FILE_PUMP` for log files replayed
+    as fast as possible, every path alike, else :data:`PUMP`), at most what the listener's FIFO always holds
     (:meth:`~gyrostand.can.receive.listener.DecodingListener.frames_that_fit`): a replay never
     overflows it, whatever ``sampling.buffer`` is. ``parallel``: parse log files in a
     reader process (None: when they total at least :data:`PARALLEL_MIN_BYTES` and this
@@ -92,14 +102,16 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
     extra ``listeners``); the bins, counts and rejections are the same either way.
     """
     damage = damage if damage is not None else LogDamage()
-    # back-pressure: pump before the listener's FIFO can overflow (a replay never drops)
-    pump_every = max(1, min(int(pump_every), ingest.listener.frames_that_fit()))
     paths: list[Path] | None = None
     if isinstance(messages, (str, Path)):
         paths = [Path(messages)]
     elif isinstance(messages, (list, tuple)) and messages and all(
             isinstance(p, (str, Path)) for p in messages):
         paths = [Path(p) for p in messages]
+    if pump_every is None:
+        pump_every = FILE_PUMP if paths is not None and not realtime else PUMP
+    # back-pressure: pump before the listener's FIFO can overflow (a replay never drops)
+    pump_every = max(1, min(int(pump_every), ingest.listener.frames_that_fit()))
     vector = not per_frame_forced() if arrays is None else bool(arrays)
     if paths is not None and not realtime and not listeners:
         # BLF read as arrays costs ~0.1 us a frame: a reader process would cost more

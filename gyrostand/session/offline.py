@@ -44,12 +44,13 @@ log = logging.getLogger(__name__)
 def run_replay(cfg: SessionConfig,
                log_path: str | Path | Sequence[str | Path] | Iterable[can.Message], *,
                out: str | Path | None = None, realtime: bool = False, speed: float = 1.0,
-               pump_every: int = 1024, parallel: bool | None = None,
+               pump_every: int | None = None, parallel: bool | None = None,
                truths: dict[str, dict[str, float]] | None = None) -> RunOutcome:
     """Replay ``log_path`` (any format python-can reads; a list of such files, read one
     after the other, e.g. the raw segments of a resumed run; or frames) through the
     pipeline, as fast as possible unless ``realtime`` (paced to frame time / ``speed``).
-    ``parallel``: parse log files in a reader process (see :func:`~gyrostand.can.replay.replay`)."""
+    ``parallel``: parse log files in a reader process; ``pump_every``: frames between
+    pumps (both: see :func:`~gyrostand.can.replay.replay`)."""
     source: Iterable[can.Message] | str | Path | list[str | Path]
     if isinstance(log_path, list | tuple) and all(isinstance(p, str | Path)
                                                   for p in log_path):

@@ -19,7 +19,7 @@ from gyrostand.can.framesim import (
 )
 from gyrostand.can.logs.read import LogDamage
 from gyrostand.can.recorder import Recorder
-from gyrostand.can.replay import paced, read_log, replay
+from gyrostand.can.replay import FILE_PUMP, PUMP, paced, read_log, replay
 from gyrostand.can.routes import ChannelMap
 from gyrostand.errors import CanEdgeError
 from gyrostand.runfolder import SamplesWriter, read_samples_csv
@@ -154,6 +154,25 @@ def test_reader_process_replay_equals_the_in_process_replay(triad_cfg, tmp_path)
     st = serial.listener.stats()
     assert st.received == len(frames) and st.rejected_total > 50 and st.counter_jumps > 0
     assert sum(len(x) for x in want) > 3 * 25
+
+
+def test_a_log_file_is_pumped_every_file_pump_frames_to_the_same_bins(triad_cfg, tmp_path):
+    """Log files replayed as fast as possible pump every FILE_PUMP frames (the array
+    path's cost is per batch); the bins and counts are those of pumps every PUMP frames,
+    on the array path and the per-frame path alike."""
+    frames = _sim(triad_cfg, n=110)
+    path = tmp_path / "a.blf"
+    write_log(path, frames)
+    assert len(frames) > 2 * FILE_PUMP >= 16 * PUMP
+    big, small, per_frame = (make_ingest(triad_cfg) for _ in range(3))
+    got = [_key(batch) for batch in replay(path, big)]
+    want = [_key(batch) for batch in replay(path, small, pump_every=PUMP)]
+    assert len(got) == len(frames) // FILE_PUMP + 1  # the full batches, then the flush
+    assert len(want) >= len(frames) // PUMP
+    assert sum(got, []) == sum(want, [])
+    assert sum(got, []) == sum((_key(b) for b in replay(path, per_frame, arrays=False)), [])
+    assert big.listener.stats() == small.listener.stats() == per_frame.listener.stats()
+    assert big.binner.stats() == small.binner.stats()
 
 
 def test_reader_process_stops_when_the_consumer_does(demo_cfg, tmp_path):
