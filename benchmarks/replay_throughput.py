@@ -95,10 +95,12 @@ BARE_LOOP = "import can, sys\nfor msg in can.LogReader(sys.argv[1]):\n    pass\n
 
 
 def _child(argv: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
-    """Wall and CPU (user + sys) s of one command in a fresh process."""
+    """Wall and CPU (user + sys) s of one command in a fresh process, run in this
+    checkout's root (``python -m gyrostand`` imports the gyrostand of its working folder
+    first: the one measured is this script's own, whatever the caller's folder)."""
     before = os.times()
     t = time.perf_counter()
-    p = subprocess.run(argv, capture_output=True, text=True, env=env)
+    p = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=ROOT)
     wall = time.perf_counter() - t
     after = os.times()
     if p.returncode != 0:
@@ -128,7 +130,10 @@ def whole_command(layout: str, frames: int, path: Path, out: Path, pairs: int,
     if bytecode_cache:
         env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
         env["PYTHONPYCACHEPREFIX"] = str(out / "pycache")
-    print(f"  ({'bytecode cached' if bytecode_cache else 'bytecode as the environment has it'}"
+    head = subprocess.run(["git", "-C", str(ROOT), "log", "-1", "--format=%h"],
+                          capture_output=True, text=True).stdout.strip() or "?"
+    print(f"  (gyrostand of {ROOT} at {head}; "
+          f"{'bytecode cached' if bytecode_cache else 'bytecode as the environment has it'}"
           f"; PYTHONDONTWRITEBYTECODE={os.environ.get('PYTHONDONTWRITEBYTECODE', '')!r} here)")
     _child(bare_cmd, env)  # warm: the file in the page cache, numba's kernels in their cache
     _child(replay_cmd, env)
