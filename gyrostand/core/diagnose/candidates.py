@@ -128,7 +128,7 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
     starts = [start, {**start, **also}] if start is not None and also else start
     new = sum(q.kind in POSITIVE_KINDS and n not in start for n, q in model.params) if start else 0
     return ml(samples, model, start=starts, n_local=(1 + (new >= 2)) if start else None,
-              hessian_passes=1)
+              hessian_passes=1, grid=not start)
 
 
 def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:

@@ -411,7 +411,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
        fixed: Mapping[str, float] | None = None, n_local: int | None = None,
        start: Mapping[str, float] | Sequence[Mapping[str, float]] | None = None,
        std_errors: bool = True,
-       hessian_passes: int = 2) -> FitResult:
+       hessian_passes: int = 2, grid: bool = True) -> FitResult:
     """Exact maximum-likelihood fit of every free parameter of ``model``.
 
     Args:
@@ -423,13 +423,16 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         std_errors: compute standard errors from the observed information.
         hessian_passes: numerical Hessians behind them (the second with steps set from
             the first pass's stds; one pass is enough to judge identification).
+        grid: start from the start grid too (:func:`start_grid`); ``False``: only from
+            ``start`` and the scans of the parameters it lacks (:func:`starts_from`), for a
+            refit from a neighbouring model's optimum (diagnose's candidates).
     """
     evaluate = _Evaluator()
     try:
         res = _ml_fit(samples, model, evaluate, sigma, fixed, n_local, start, std_errors,
-                      hessian_passes)
+                      hessian_passes, grid)
         return plain_shapes(res, model, fixed, lambda held, at: _ml_fit(
-            samples, model, evaluate, sigma, held, 1, at, std_errors, hessian_passes))
+            samples, model, evaluate, sigma, held, 1, at, std_errors, hessian_passes, grid))
     finally:
         evaluate.close()
 
@@ -438,7 +441,7 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
             fixed: Mapping[str, float] | None, n_local: int | None,
             start: Mapping[str, float] | Sequence[Mapping[str, float]] | None,
             std_errors: bool,
-            hessian_passes: int) -> FitResult:
+            hessian_passes: int, grid: bool = True) -> FitResult:
     """:func:`ml_fit`, its likelihood evaluated by ``evaluate``."""
     fixed = dict(fixed or {})
     if sigma is not None:
@@ -449,9 +452,12 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     require_samples(samples, samples.n_observed, n_free + 2, "ml")
     warnings = list(samples.warnings)
 
-    starts = start_grid(prob, {"markov.beta": lsq_beta(samples, model)})
+    starts = start_grid(prob, {"markov.beta": lsq_beta(samples, model) if grid else None})
+    n_grid = len(starts)
     for one in ([start] if isinstance(start, Mapping) else start or []):
         starts += starts_from(prob, starts, one) if one else []
+    if not grid and len(starts) > n_grid:
+        starts = starts[n_grid:]
     z, info, more = optimise(prob, starts, n_local, evaluate)
     warnings += more
     at_bound = info.get("at_bound", [])
