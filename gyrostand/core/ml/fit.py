@@ -66,6 +66,8 @@ TIME_MIN_STEPS = 3.0
 TIME_MAX_RECORDS = 1.0
 #: points of the scan over a nonlinear parameter new to a refit (see ml_fit's ``start``)
 SCAN_POINTS = 13
+#: regressor matrices a problem keeps (by the parameters they depend on)
+X_CACHE = 8
 #: most threads one fit evaluates its likelihood on (see :func:`_evaluator`)
 MAX_THREADS = 4
 
@@ -158,6 +160,9 @@ class Problem:
         self.n_obs = samples.n_observed
         self.nevals = 0
         self._count = threading.Lock()  # profile() may run on several threads at once
+        # regressors depend on rates, times and widths, not on noise levels or coefficients
+        self._x_names = [n for n, q in model.params if q.kind not in ("std", "linear")]
+        self._x_cache: dict[tuple, np.ndarray] = {}
 
     def kind(self, name: str) -> str:
         """The kind of a searched parameter (``rate``, ``time``, ``std``)."""
@@ -176,7 +181,12 @@ class Problem:
     def gram(self, p: Mapping[str, float]) -> tuple[np.ndarray, float, int]:
         """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
         the innovations, Σ ln f, and the number of observed samples."""
-        X = self.model.regressors(p, self.ctx)
+        key = tuple(p.get(n) for n in self._x_names)
+        X = self._x_cache.get(key)
+        if X is None:
+            X = self.model.regressors(p, self.ctx)
+            with self._count:  # the oldest out: a gradient's points are near each other
+                self._x_cache = {**dict(list(self._x_cache.items())[1 - X_CACHE:]), key: X}
         ss = self.model.state_space(p, self.samples.dt)
         Y = np.empty((X.shape[0], 1 + X.shape[1]))
         Y[:, 0] = self.samples.drift
