@@ -66,7 +66,7 @@ TIME_MIN_STEPS = 3.0
 TIME_MAX_RECORDS = 1.0
 #: points of the scan over a nonlinear parameter new to a refit (see ml_fit's ``start``)
 SCAN_POINTS = 13
-#: regressor matrices a problem keeps (by the parameters they depend on)
+#: filter inputs [y, X] a problem keeps (by the parameters its regressors X depend on)
 X_CACHE = 8
 #: most threads one fit evaluates its likelihood on (see :func:`_evaluator`)
 MAX_THREADS = 4
@@ -182,15 +182,15 @@ class Problem:
         """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
         the innovations, Σ ln f, and the number of observed samples."""
         key = tuple(p.get(n) for n in self._x_names)
-        X = self._x_cache.get(key)
-        if X is None:
+        Y = self._x_cache.get(key)  # [y, X], which the filter only reads
+        if Y is None:
             X = self.model.regressors(p, self.ctx)
+            Y = np.empty((X.shape[0], 1 + X.shape[1]))
+            Y[:, 0] = self.samples.drift
+            Y[:, 1:] = X
             with self._count:  # the oldest out: a gradient's points are near each other
-                self._x_cache = {**dict(list(self._x_cache.items())[1 - X_CACHE:]), key: X}
+                self._x_cache = {**dict(list(self._x_cache.items())[1 - X_CACHE:]), key: Y}
         ss = self.model.state_space(p, self.samples.dt)
-        Y = np.empty((X.shape[0], 1 + X.shape[1]))
-        Y[:, 0] = self.samples.drift
-        Y[:, 1:] = X
         _, _, G, slogf, n = kf_run(ss.phi, ss.q, ss.p0, ss.r, self.weights, Y, False)
         return G, slogf, n
 
