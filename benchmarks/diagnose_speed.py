@@ -12,7 +12,10 @@ diagnose`` (screened and ``--no-screen``) against ``gyrostand identify --method 
 the same 6-h CSV, by the CPU time of each child process (the acceptance: diagnose's CPU
 <= 2.5 x identify's).
 
-Run: ``.venv/bin/python benchmarks/diagnose_speed.py``
+Run: ``.venv/bin/python benchmarks/diagnose_speed.py [--commands-only] [--before TREE]``
+(``--commands-only``: the whole commands alone; ``--before TREE``: each command also run
+from another checkout, e.g. ``git worktree add --detach ../before REV``, pair by pair in
+the same rounds, so that both ratios are measured under the same load)
 """
 
 from __future__ import annotations
@@ -40,16 +43,37 @@ from gyrostand.core.simulation import simulate
 ANCHOR_S = 10.0
 
 
+ROOT = Path(__file__).resolve().parents[1]
+
+
 def main() -> None:
+    before = Path(sys.argv[sys.argv.index("--before") + 1]).resolve() \
+        if "--before" in sys.argv else None
+    if "--commands-only" in sys.argv:
+        commands(data(), before)
+        return
+    s = data()
+    m = Model.parse("markov,temp,bias")
+    ml(s, m)  # warm-up: numba's compiled kernels are loaded from cache once per process
+    stages(s, m)
+    commands(s, before)
+
+
+def data() -> Samples:
+    """The 6-h run with a hidden temp_rate effect, its sensor quantised."""
     truth = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
              "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 5.0}
     s = simulate(Model.parse("markov,temp,bias,temp_rate"), truth, chamber_profile(6.0),
                  seed=1)
     rng = np.random.default_rng(2)
     temp = np.round((s.temp + 0.01 * rng.standard_normal(len(s))) / 0.05) * 0.05
-    s = Samples.from_arrays(s.t, s.drift, temp)
-    m = Model.parse("markov,temp,bias")
-    ml(s, m)  # warm-up: numba's compiled kernels are loaded from cache once per process
+    return Samples.from_arrays(s.t, s.drift, temp)
+
+
+def stages(s: Samples, m: Model) -> None:
+    """Each stage in process, the candidates with and without the screen."""
+    truth = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+             "white.sigma": 0.02, "bias.b": 0.3}
     print(f"data: {len(s)} samples (6-h chamber cycle), hidden temp_rate; model {m}; "
           f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     t0 = time.perf_counter()
@@ -87,7 +111,6 @@ def main() -> None:
     print(f"total diagnose {total:.2f} s = {total / ANCHOR_S:.2f} x the {ANCHOR_S:.0f}-s anchor "
           f"({'PASS' if total < ANCHOR_S else 'MISS'}); "
           f"mean per candidate {(t3 - tr) / len(cands):.2f} s")
-    commands(s)
 
 
 def side_by_side(s: Samples, m: Model, fit, what: str) -> None:
@@ -109,37 +132,58 @@ def side_by_side(s: Samples, m: Model, fit, what: str) -> None:
               f"{', '.join(out) or 'none'}; first {cands[0].term}")
 
 
-def child_cpu(cmd: list[str]) -> float:
-    """CPU seconds (user + system) of one child process run to its end."""
+def child_cpu(cmd: list[str], tree: Path = ROOT) -> float:
+    """CPU seconds (user + system) of one child process run to its end, its ``gyrostand``
+    the one of ``tree`` (``-m`` imports its working folder's package first)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                   cwd=tree, env=dict(os.environ, PYTHONPATH=str(tree)))
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def commands(s: Samples) -> None:
-    """diagnose ÷ identify --method ml, CPU of whole processes on the same 6-h CSV."""
+def commands(s: Samples, before: Path | None = None) -> None:
+    """diagnose ÷ identify --method ml, CPU of whole processes on the same 6-h CSV; with
+    ``before``, the same commands of that checkout in the same rounds."""
     gyro = [sys.executable, "-m", "gyrostand"]
+    trees = {"": ROOT} if before is None else {"": ROOT, "before: ": before}
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "run6h.csv"
         s.to_csv(csv)
-        ident = [gyro + ["identify", str(csv), "--method", "ml", "--json"]]
+        ident = gyro + ["identify", str(csv), "--method", "ml", "--json"]
         diag = gyro + ["diagnose", str(csv), "--model", "markov,temp,bias"]
-        child_cpu(ident[0])  # warm: numba's cache
-        rows = {"identify --method ml": ident[0], "diagnose --no-screen":
+        rows = {"identify --method ml": ident, "diagnose --no-screen":
                 diag + ["--no-screen"], "diagnose": diag}
-        cpu = {k: [] for k in rows}
-        for _ in range(2):
+        for tree in trees.values():  # warm: numba's cache, every kernel diagnose uses
+            child_cpu(ident, tree)
+            child_cpu(diag, tree)
+        cpu: dict[tuple[str, str], list[float]] = {}
+        for _ in range(2 if before is None else 3):
             for k, cmd in rows.items():
-                cpu[k].append(child_cpu(cmd))
-        best = {k: min(v) for k, v in cpu.items()}
-        for k, v in best.items():
-            print(f"  {k:<22} CPU {v:6.2f} s (best of 2)  = {v / best['identify --method ml']:.2f}"
-                  " x identify")
-        r = best["diagnose"] / best["identify --method ml"]
-        print(f"diagnose CPU / identify --method ml CPU = {r:.2f} (acceptance <= 2.5: "
-              f"{'PASS' if r <= 2.5 else 'MISS'}); --no-screen "
-              f"{best['diagnose --no-screen'] / best['identify --method ml']:.2f}")
+                for label, tree in trees.items():
+                    cpu.setdefault((label, k), []).append(child_cpu(cmd, tree))
+        for label, tree in trees.items():
+            best = {k: min(cpu[(label, k)]) for k in rows}
+            n = len(cpu[(label, "diagnose")])
+            print(f"{label}{tree} ({_commit(tree)}); load average "
+                  f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+            for k, v in best.items():
+                print(f"  {k:<22} CPU {v:6.2f} s (best of {n})  = "
+                      f"{v / best['identify --method ml']:.2f} x identify")
+            r = best["diagnose"] / best["identify --method ml"]
+            print(f"{label}diagnose CPU / identify --method ml CPU = {r:.2f} (acceptance <= "
+                  f"2.5: {'PASS' if r <= 2.5 else 'MISS'}); --no-screen "
+                  f"{best['diagnose --no-screen'] / best['identify --method ml']:.2f}")
+
+
+def _commit(tree: Path) -> str:
+    """The checkout's commit (and '+ changes' when its tree differs from it)."""
+    git = ["git", "-C", str(tree)]
+    rev = subprocess.run(git + ["rev-parse", "--short", "HEAD"], capture_output=True,
+                         text=True).stdout.strip() or "?"
+    dirty = subprocess.run(git + ["status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return rev + (" + changes" if dirty else "")
 
 
 if __name__ == "__main__":
