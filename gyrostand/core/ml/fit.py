@@ -461,8 +461,8 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     n_free = len(prob.znames) + len(prob.lin_free) + (1 if prob.concentrate else 0)
     require_samples(samples, samples.n_observed, n_free + 2, "ml")
     warnings = list(samples.warnings)
-
-    starts = start_grid(prob, {"markov.beta": lsq_beta(samples, model) if grid else None})
+    seed = lsq_beta(samples, model) if grid or not start else None  # grid points' only
+    starts = start_grid(prob, {"markov.beta": seed})
     n_grid = len(starts)
     for one in ([start] if isinstance(start, Mapping) else start or []):
         starts += starts_from(prob, starts, one) if one else []

@@ -314,7 +314,10 @@ class Term:
 
     # ---- batch: the model's regressors and states ---------------------------------------
     def regressors(self, p: P, ctx: Context) -> dict[str, np.ndarray]:
-        """Regressor column of each linear parameter, keyed by full name.
+        """Regressor column of each linear parameter, keyed by full name. A function of the
+        model's rates, time constants and widths (any kind but ``std`` and ``linear``):
+        ML keeps the columns of the points it has seen by those values
+        (:class:`~gyrostand.core.ml.fit.Problem`), so they must not depend on a noise level.
 
         An input term's regressor is its input through the drift's dynamics,
         ``X = ∫ e^{−β(t−s)} u(T_L(s)) ds`` (:meth:`input` of the effective temperature).

@@ -1,0 +1,90 @@
+"""Where ML starts, and what one ML problem reuses (#25 item 2: diagnose's candidate refits).
+
+A refit from a neighbouring model's optimum (``ml(..., start=fit.values, grid=False)``)
+starts only from that optimum and from scans of the parameters it lacks, not from the whole
+start grid, and reaches the optimum the grid-started fit reaches. An ML problem keeps its
+filter input ``[y, X]`` by the parameters its regressors depend on: every point — moving a
+rate, a time constant, a width, a noise level or a coefficient — gives the same Gram matrix
+as a problem that computes everything afresh.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrostand.core.data import Samples
+from gyrostand.core.ml.fit import SCAN_POINTS, Problem, ml
+from gyrostand.core.model import Model
+from gyrostand.core.profiles import chamber_profile
+from gyrostand.core.simulation import simulate
+
+TRUTH = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+         "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 5.0}
+
+
+def _run(hours: float = 2.0, seed: int = 7) -> Samples:
+    s = simulate(Model.parse("markov,temp,bias,temp_rate"), TRUTH, chamber_profile(hours),
+                 seed=seed)
+    # the sensor quantised to 0.05 degC, as a stand's
+    return Samples.from_arrays(s.t, s.drift, np.round(s.temp / 0.05) * 0.05)
+
+
+def test_a_refit_without_the_grid_starts_from_the_fit_and_reaches_the_same_optimum():
+    s = _run()
+    base = ml(s, Model.parse("markov,temp,bias,white"))
+    bigger = Model.parse("markov,temp,bias,white,temp_rate")
+    full = ml(s, bigger, start=base.values)
+    fast = ml(s, bigger, start=base.values, grid=False)
+    # the base's optimum, and temp_rate.tau (new) scanned over its range with it
+    assert fast.info["start_points"] == 1 + SCAN_POINTS
+    assert full.info["start_points"] > fast.info["start_points"] + 10
+    assert fast.info["evaluations"] < full.info["evaluations"]
+    assert full.loglik is not None and fast.loglik is not None
+    assert abs(fast.loglik - full.loglik) < 1e-3, (fast.loglik, full.loglik)
+    assert abs(fast.value("temp_rate.k") - full.value("temp_rate.k")) < 1e-3 * full.std(
+        "temp_rate.k")
+    # the effect is found (truth 5): the refit is a fit, not its start
+    assert abs(fast.value("temp_rate.k") - 5.0) < 3 * fast.std("temp_rate.k")
+
+
+def test_without_a_start_the_grid_is_used_whatever_grid_says():
+    s = _run(1.0)
+    model = Model.parse("markov,temp,bias,white")
+    a, b = ml(s, model), ml(s, model, grid=False)
+    assert a.info["start_points"] == b.info["start_points"] > 1
+    assert a.loglik == b.loglik
+
+
+def test_the_kept_filter_input_gives_the_same_gram_as_a_fresh_problem(monkeypatch):
+    s = _run(1.0)
+    model = Model.parse("markov,temp,bias,white,temp_rate,hysteresis")
+    kept = Problem(model, s, {})
+    rng = np.random.default_rng(3)
+    p0 = {"markov.beta": 0.01, "markov.sigma": 0.05, "white.sigma": 0.02,
+          "temp.gamma": -5e-4, "bias.b": 0.3, "temp_rate.k": 5.0, "temp_rate.tau": 300.0,
+          "hysteresis.h": 0.1, "hysteresis.tau": 60.0, "hysteresis.w": 0.003}
+    builds = []
+    real = Model.regressors
+    monkeypatch.setattr(Model, "regressors", lambda self, p, ctx: builds.append(
+        self is model) or real(self, p, ctx))
+    moved, shaped = 0, 0
+    for i in range(20):  # 6 distinct rate/shape points: fewer than the 8 kept
+        p = dict(p0)
+        # one parameter moved at a time, as a gradient's and a Hessian's points do, and
+        # now and then back to p0 (a point whose [y, X] is kept)
+        name = sorted(p0)[i % len(p0)]
+        if i % 3:
+            p[name] *= float(np.exp(0.2 * rng.standard_normal()))
+            moved += 1
+            shaped += model.kind(name) not in ("std", "linear")
+        before = sum(builds)
+        G, slogf, n = kept.gram(p)
+        own = sum(builds) - before
+        G1, slogf1, n1 = Problem(model, s, {}).gram(p)
+        assert n == n1 and slogf == slogf1, name
+        np.testing.assert_array_equal(G, G1, err_msg=name)
+        if not (i % 3 and model.kind(name) not in ("std", "linear")) and i > 0:
+            assert own == 0, name  # a noise level, a coefficient or p0: the kept input
+    assert moved > 10
+    # the regressors were built for p0 and for each point that moved a rate or a shape
+    assert sum(builds) - 20 == 1 + shaped, (sum(builds), shaped)
