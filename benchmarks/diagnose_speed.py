@@ -41,6 +41,9 @@ from gyrostand.core.profiles import chamber_profile
 from gyrostand.core.simulation import simulate
 
 ANCHOR_S = 10.0
+#: the gyro (a clean run ignores temp_rate.k)
+TRUTH = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
+         "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 5.0}
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,9 +64,7 @@ def main() -> None:
 
 def data() -> Samples:
     """The 6-h run with a hidden temp_rate effect, its sensor quantised."""
-    truth = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
-             "white.sigma": 0.02, "bias.b": 0.3, "temp_rate.k": 5.0}
-    s = simulate(Model.parse("markov,temp,bias,temp_rate"), truth, chamber_profile(6.0),
+    s = simulate(Model.parse("markov,temp,bias,temp_rate"), TRUTH, chamber_profile(6.0),
                  seed=1)
     rng = np.random.default_rng(2)
     temp = np.round((s.temp + 0.01 * rng.standard_normal(len(s))) / 0.05) * 0.05
@@ -72,8 +73,6 @@ def data() -> Samples:
 
 def stages(s: Samples, m: Model) -> None:
     """Each stage in process, the candidates with and without the screen."""
-    truth = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
-             "white.sigma": 0.02, "bias.b": 0.3}
     print(f"data: {len(s)} samples (6-h chamber cycle), hidden temp_rate; model {m}; "
           f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     t0 = time.perf_counter()
@@ -99,7 +98,7 @@ def stages(s: Samples, m: Model) -> None:
         print(f"    {c.term:<12} {c.seconds:6.2f} s   LR {c.lr_stat:8.2f}  p {c.p_value:.2g}")
     print(f"ranked first: {cands[0].term}")
     side_by_side(s, m, fit, "hidden temp_rate")
-    clean = simulate(Model.parse("markov,temp,bias"), truth, chamber_profile(6.0), seed=3)
+    clean = simulate(Model.parse("markov,temp,bias"), TRUTH, chamber_profile(6.0), seed=3)
     clean = Samples.from_arrays(clean.t, clean.drift, np.round(clean.temp / 0.05) * 0.05)
     cfit = ml(clean, m)
     side_by_side(clean, m, cfit, "clean 6-h run")

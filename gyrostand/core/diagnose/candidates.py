@@ -33,14 +33,15 @@ runs share; a per-run shape (a warm-up's τ, one process per run) keeps χ² wit
 counted. Other candidates with a parameter not identified under the null
 (``temp_lag``'s τ, ``markov2``'s β₂) get one more degree of freedom and no halving: we
 measured false alarms of ``temp_lag`` at 2 of 4 seeds with χ²(1)/2 when ``temp_rate`` is in
-the model. ``Candidate.test`` names the reference distribution used; the df shown is the
-df used. Candidates are ranked by ΔBIC, best first (BIC's ln n per parameter prefers the simpler of two effects that fit
-alike — a trend over a warm-up with a very long time constant — where AIC would not). A
-shape parameter with a plain shape (``Param.default``: no lag, the standard width) that
-the data do not determine (at a search bound, or |estimate| < 2 std) is not counted in
-ΔAIC/ΔBIC: the fit is then the term's plain shape, whose one coefficient is what it adds
-(as in Laplace's approximation behind BIC, ln n per parameter is the price of a parameter
-the data pin down; one they leave free costs ~nothing; ``Candidate.n_params``).
+the model. ``Candidate.test`` names the reference distribution used; the df shown is the df used.
+Candidates are ranked by ΔBIC, best first (BIC's ln n per parameter prefers the simpler of two
+effects that fit alike — a trend over a warm-up with a very long time constant — where AIC would
+not). A shape parameter with a plain shape (``Param.default``: no lag, the standard width) that the
+data do not determine (at a search bound, or |estimate| < 2 std) is not counted in ΔAIC/ΔBIC: the
+fit is then the term's plain shape, whose one coefficient is what it adds (as in Laplace's
+approximation behind BIC, ln n per parameter is the price of a parameter the data pin down; one
+they leave free costs ~nothing). ``Candidate.n_params`` is the count used. The verdict is
+:mod:`.verdict`'s.
 """
 
 from __future__ import annotations
@@ -114,21 +115,20 @@ def _halved(term: str) -> bool:
 
 def refit(samples: Samples, model: Model, base: FitResult | None,
           also: Mapping[str, float] | None = None) -> FitResult:
-    """ML fit of ``model``, started from ``base`` where it shares parameters (and from
-    ``base`` with ``also``'s values, e.g. the saturated reference's random part, so that a
-    fit whose random part absorbed a misfit is not the only start); several runs (a tuple
-    of :class:`Samples`) are fitted jointly (:func:`~.multirun.joint_ml`). One local search,
-    two where the term adds two shapes (measured: benchmarks/results/diagnose_speed.txt)."""
+    """ML fit of ``model`` from ``base`` where it shares parameters, and from ``base`` with
+    ``also``'s values (the reference's random part: a fit whose random part absorbed a misfit
+    is not the only start); no start grid, one local search, two where the term adds two
+    shapes (a hysteresis refit's second basin won by up to 32 in ln L); runs fitted jointly."""
     start = base.values if base is not None else None
     if isinstance(samples, tuple):
         from ..ml.joint import joint_ml
-
         return joint_ml(samples, model, start=start,  # type: ignore[return-value]
                         n_local=2 if base is not None else None, hessian_passes=1)
-    starts = [start, {**start, **also}] if start is not None and also else start
-    new = sum(q.kind in POSITIVE_KINDS and n not in start for n, q in model.params) if start else 0
-    return ml(samples, model, start=starts, n_local=(1 + (new >= 2)) if start else None,
-              hessian_passes=1, grid=not start)
+    if start is None:
+        return ml(samples, model, hessian_passes=1)
+    shapes = sum(q.kind in POSITIVE_KINDS and n not in start for n, q in model.params)
+    return ml(samples, model, start=[start, {**start, **also}] if also else start,
+              n_local=2 if shapes >= 2 else 1, hessian_passes=1, grid=False)
 
 
 def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:

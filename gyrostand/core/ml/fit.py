@@ -66,7 +66,7 @@ TIME_MIN_STEPS = 3.0
 TIME_MAX_RECORDS = 1.0
 #: points of the scan over a nonlinear parameter new to a refit (see ml_fit's ``start``)
 SCAN_POINTS = 13
-#: filter inputs [y, X] a problem keeps (by the parameters its regressors X depend on)
+#: filter inputs [y, X] a problem keeps (>= 2; by the parameters its regressors depend on)
 X_CACHE = 8
 #: most threads one fit evaluates its likelihood on (see :func:`_evaluator`)
 MAX_THREADS = 4
