@@ -93,7 +93,8 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     * ``E`` (N, m): innovations ``e_k = Y_k - H x_{k|k-1}`` (NaN where missing), and
       ``f`` (N,): their variance ``f_k = H P_{k|k-1} H' + r`` — only when ``store``,
       else empty arrays (the likelihood needs no (N, m) array);
-    * ``G = sum_k e_k e_k' / f_k`` (m, m), ``slogf = sum_k ln f_k`` and ``nobs`` over
+    * ``G = sum_k e_k e_k' / f_k`` (m, m) — only when not ``store`` (else zeros: who
+      keeps E makes what it needs of it), ``slogf = sum_k ln f_k`` and ``nobs`` over
       the observed samples (``slogf = -inf`` if some ``f_k <= 0``).
 
     Steady state, exactly: the covariance recursion P_{k+1|k} = F (I − K_k H) P_{k|k−1} ...
@@ -177,7 +178,9 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                 f_out[k] = f
                 for c in range(m):
                     E[k, c] = e_row[c]
-            if wide:
+            if store:
+                pass  # the caller reads E and f: no Gram matrix (m² a sample)
+            elif wide:
                 # G += e e' / f by blocks: the rows e / sqrt(f) gathered, then one
                 # matrix product a block (BLAS), not m(m+1)/2 divisions a sample
                 for c in range(m):

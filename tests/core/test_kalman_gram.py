@@ -1,5 +1,6 @@
 """The Gram matrix of the filtered columns: the block product for a wide ``Y`` (the
-saturated reference's) is the same sum as the sample-by-sample one of a narrow ``Y``."""
+saturated reference's) is the same sum as the sample-by-sample one of a narrow ``Y``, and
+the sum of the innovations' products the filter keeps when asked to (``store``)."""
 
 import numpy as np
 import pytest
@@ -17,7 +18,9 @@ def test_gram_is_the_sum_of_whitened_innovation_products(m: int, weighted: bool)
     phi, q, p0 = np.array([0.99, 0.5]), np.array([1e-3, 0.2]), np.array([0.1, 1.0])
     # a changing R (the covariance never steady) or none (steady after a few hundred)
     rw = 1.0 + rng.random(N) if weighted else np.zeros(0)
-    E, f, G, slogf, n = kf_run(phi, q, p0, 0.01, rw, Y, True)
+    E, f, G0, _, _ = kf_run(phi, q, p0, 0.01, rw, Y, True)
+    assert not G0.any()  # who keeps E gets no Gram matrix (m² a sample saved)
+    _, _, G, slogf, n = kf_run(phi, q, p0, 0.01, rw, Y, False)
     ok = ~np.isnan(Y[:, 0])
     want = (E[ok] / f[ok, None]).T @ E[ok]
     assert n == N - 3

@@ -30,8 +30,9 @@ from ..validate import prepare
 #: at 81 × 9, in 0.9 and 0.55 s of CPU
 SHAPE_POINTS = 41
 SHAPE_POINTS_2D = (81, 9)
-#: regressor columns filtered together
-FILTER_COLUMNS = 8
+#: regressor columns filtered together (the filter keeps their innovations, n·m a sample,
+#: and sums no Gram matrix: a slice of a 2-D grid at once)
+FILTER_COLUMNS = 96
 
 
 def shape_params(model: Model, term: str) -> tuple[str, ...]:
@@ -150,8 +151,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
             cols_r = [owner.regressors({**p0, **{n: float(np.exp(v)) for n, v in
                                                  zip(shapes, z, strict=True)}}, ctx)[lin]
                       for z in zs]
-            # through the filter a few columns at a time (it also sums their m × m Gram
-            # matrix, which costs m² per sample)
+            # through the filter :data:`FILTER_COLUMNS` at a time (memory)
             C = np.empty((int(ok.sum()), len(cols_r)))
             for i in range(0, len(cols_r), FILTER_COLUMNS):
                 part = np.column_stack(cols_r[i:i + FILTER_COLUMNS])

@@ -1,4 +1,5 @@
-"""Exact Gaussian maximum likelihood: one run (:mod:`.fit`), its standard errors
+"""Exact Gaussian maximum likelihood: one run (:mod:`.fit`; its search :mod:`.search`
+with the analytic score :mod:`.score`), its standard errors
 (:mod:`.cov`) and several runs of one gyro at once (:mod:`.joint`).
 
 The problem (:class:`~.fit.Problem`), the optimiser and its start grids are public: the
@@ -14,7 +15,7 @@ EXPORTS: dict[str, str] = {
     "ml": "fit",
     "ml_fit": "fit",
     "Problem": "fit",
-    "optimise": "fit",
+    "optimise": "search",
     "start_grid": "fit",
     "starts_from": "fit",
     "concentrated_loglik": "gls",

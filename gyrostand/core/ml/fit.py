@@ -15,7 +15,8 @@ parameter. Two exact reductions keep the search small and fast:
   variances is concentrated out too: ``s² = (1/n) Σ e_k²/f̃_k``.
 
 What remains — log rates (β, β₂, ...) and log noise ratios — is searched with L-BFGS-B
-from the best points of a start grid seeded by least squares. Standard errors come from the
+(:mod:`.search`) from the best points of a start grid seeded by least squares, its gradient
+the analytic score (:mod:`.score`). Standard errors come from the
 observed information (numerical Hessian of ln L in the natural parameters).
 """
 
@@ -30,7 +31,6 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
 from threadpoolctl import threadpool_limits
 
 from ...errors import IdentificationError, ModelError
@@ -45,19 +45,12 @@ from .cov import hessian as hessian
 from .cov import observed_covariance
 from .gls import concentrated_loglik, fill_natural
 from .plain import plain_shapes
+from .score import score
+from .search import optimise
 
 log = logging.getLogger(__name__)
 
 RATIO_BOUNDS = (1e-6, 1e3)
-#: step of the central-difference gradient in the log parameters
-GRAD_STEP = 1e-5
-#: L-BFGS-B's tolerance on the projected gradient of −ln L / n (per log-parameter): at the
-#: curvature of a typical fit this leaves the optimum within ~1e-5 of its std
-GTOL = 1e-8
-#: ... and on the relative reduction of −ln L / n: 1e-10 leaves ln L within ~1e-5 of its
-#: maximum on a 6-hour run (a likelihood-ratio test needs ~1e-2), and stops the crawl
-#: along the flat ridges of over-parametrised candidate models
-FTOL = 1e-10
 
 
 #: a time constant (warm-up, thermal lag) lies between this many steps Δt ...
@@ -68,6 +61,9 @@ TIME_MAX_RECORDS = 1.0
 SCAN_POINTS = 13
 #: filter inputs [y, X] a problem keeps (>= 2; by the parameters its regressors depend on)
 X_CACHE = 8
+#: filter outputs (G, Σ ln f, n) a problem keeps, by every parameter but the coefficients:
+#: a Hessian's ~2d(d−1) distinct filter passes among its 2d² points
+G_CACHE = 64
 #: most threads one fit evaluates its likelihood on (see :func:`_evaluator`)
 MAX_THREADS = 4
 
@@ -161,8 +157,11 @@ class Problem:
         self.nevals = 0
         self._count = threading.Lock()  # profile() may run on several threads at once
         # regressors depend on rates, times and widths, not on noise levels or coefficients
-        self._x_names = [n for n, q in model.params if q.kind not in ("std", "linear")]
+        self.x_names = [n for n, q in model.params if q.kind not in ("std", "linear")]
         self._x_cache: dict[tuple, np.ndarray] = {}
+        # the filter's output depends on every parameter but the coefficients
+        self._g_names = [n for n, q in model.params if q.kind != "linear"]
+        self._g_cache: dict[tuple, tuple[np.ndarray, float, int]] = {}
 
     def kind(self, name: str) -> str:
         """The kind of a searched parameter (``rate``, ``time``, ``std``)."""
@@ -181,8 +180,22 @@ class Problem:
     def gram(self, p: Mapping[str, float]) -> tuple[np.ndarray, float, int]:
         """Filter ``[y, X(p)]`` with the model's gains at ``p``: Gram matrix Σ e e'/f of
         the innovations, Σ ln f, and the number of observed samples."""
-        key = tuple(p.get(n) for n in self._x_names)
-        Y = self._x_cache.get(key)  # [y, X], which the filter only reads
+        key = tuple(p.get(n) for n in self._g_names)
+        out = self._g_cache.get(key)  # a Hessian's steps in a coefficient: the same G
+        if out is None:
+            Y = self.filter_input(p)
+            ss = self.model.state_space(p, self.samples.dt)
+            _, _, G, slogf, n = kf_run(ss.phi, ss.q, ss.p0, ss.r, self.weights, Y, False)
+            out = (G, slogf, n)
+            with self._count:
+                self._g_cache = {**dict(list(self._g_cache.items())[1 - G_CACHE:]), key: out}
+        return out
+
+    def filter_input(self, p: Mapping[str, float]) -> np.ndarray:
+        """``[y, X(p)]``, which the filter only reads: kept for the last :data:`X_CACHE`
+        values of the parameters the regressors depend on (:attr:`x_names`)."""
+        key = tuple(p.get(n) for n in self.x_names)
+        Y = self._x_cache.get(key)
         if Y is None:
             X = self.model.regressors(p, self.ctx)
             Y = np.empty((X.shape[0], 1 + X.shape[1]))
@@ -190,9 +203,7 @@ class Problem:
             Y[:, 1:] = X
             with self._count:  # the oldest out: a gradient's points are near each other
                 self._x_cache = {**dict(list(self._x_cache.items())[1 - X_CACHE:]), key: Y}
-        ss = self.model.state_space(p, self.samples.dt)
-        _, _, G, slogf, n = kf_run(ss.phi, ss.q, ss.p0, ss.r, self.weights, Y, False)
-        return G, slogf, n
+        return Y
 
     def profile(self, z: np.ndarray):
         """Concentrated ln L at ``z``; also θ̂, scale s² and the GLS information."""
@@ -220,6 +231,14 @@ class Problem:
             theta = np.zeros(0)
         ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
         return ll, (p, theta, s2, A)
+
+    #: :meth:`score` gives the search its gradient (else central differences)
+    analytic_score = True
+
+    def score(self, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndarray:
+        """∂ ln L / ∂z of the concentrated ln L at ``z``, its GLS ``theta`` and ``s2``
+        (:func:`.score.score`: one tangent-linear filter pass)."""
+        return score(self, z, theta, s2)
 
     def full_loglik(self, p: Mapping[str, float]) -> float:
         """Exact ln L at natural parameters ``p`` (nothing concentrated): equals
@@ -283,20 +302,6 @@ def lsq_beta(samples: Samples, model: Model) -> float | None:
     return b if b > 0 else None
 
 
-def _newton_gain(res, n: int) -> float:
-    """ln L still to gain by a quasi-Newton step from L-BFGS-B's end point (½ g'H⁻¹g · n).
-
-    L-BFGS-B stops 'abnormally' when its line search cannot improve a value that is already
-    optimal to rounding; a negligible remaining gain means the optimum is reached.
-    """
-    g = np.asarray(res.jac, dtype=float)
-    try:
-        step = res.hess_inv.matvec(g) if hasattr(res.hess_inv, "matvec") else res.hess_inv @ g
-    except Exception:  # noqa: BLE001 - no curvature model: be conservative
-        return np.inf
-    return float(0.5 * abs(g @ step) * n)
-
-
 def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
                  ) -> list[np.ndarray]:
     """Start points from a previous fit's natural values ``start`` (by searched name), and
@@ -324,86 +329,6 @@ def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
             z[i] = v
             out.append(z)
     return out
-
-
-def _sequential(fun: Callable[[np.ndarray], float],
-                points: Sequence[np.ndarray]) -> list[float]:
-    return [fun(z) for z in points]
-
-
-def optimise(prob, starts: list[np.ndarray], n_local: int | None,
-              evaluate: Callable[[Callable[[np.ndarray], float], Sequence[np.ndarray]],
-                                 list[float]] = _sequential
-              ) -> tuple[np.ndarray, dict[str, Any], list[str]]:
-    """Maximise the concentrated ln L of ``prob`` (a :class:`Problem`, or the joint
-    problem of several runs, :mod:`~gyrostand.core.ml.joint`) by L-BFGS-B from the best of
-    ``starts``: the searched point ``z``, the search's info and its warnings. ``evaluate``
-    gives the objective at several points (the start grid, a gradient's points): an
-    :class:`_Evaluator`'s thread pool, or one after the other."""
-    warnings: list[str] = []
-
-    def obj(z: np.ndarray) -> float:
-        ll, _ = prob.profile(z)
-        return -ll / prob.n_obs if np.isfinite(ll) else 1e10
-
-    at_bound: list[str] = []
-    lo = np.array([b[0] for b in prob.bounds])
-    hi = np.array([b[1] for b in prob.bounds])
-
-    def grad(z: np.ndarray) -> np.ndarray:
-        # central differences in the log parameters (one-sided at a bound)
-        g = np.empty(z.size)
-        pts = []
-        for i in range(z.size):
-            up, dn = z.copy(), z.copy()
-            up[i] = min(z[i] + GRAD_STEP, hi[i])
-            dn[i] = max(z[i] - GRAD_STEP, lo[i])
-            pts += [up, dn]
-        vals = evaluate(obj, pts)
-        for i in range(z.size):
-            g[i] = (vals[2 * i] - vals[2 * i + 1]) / (pts[2 * i][i] - pts[2 * i + 1][i])
-        return g
-
-    if prob.znames:
-        vals = evaluate(obj, starts)
-        order = np.argsort(vals)
-        if n_local is None:
-            n_local = 2 if len(prob.rates) <= 1 else 5
-        # best first, then the best of those whose rates differ by a factor > 5 from every
-        # start already chosen: different basins (with measurement noise the likelihood
-        # of β has a spurious maximum near 1/Δt besides the true one)
-        chosen: list[int] = []
-        nr = len(prob.rates)
-        for i in order:
-            if all(np.max(np.abs(starts[i][:nr] - starts[j][:nr]), initial=0.0) > np.log(5)
-                   for j in chosen):
-                chosen.append(i)
-            if len(chosen) >= max(1, n_local):
-                break
-        best = None
-        for i in chosen:
-            res = minimize(obj, starts[i], jac=grad, method="L-BFGS-B", bounds=prob.bounds,
-                           options={"maxiter": 300, "ftol": FTOL, "gtol": GTOL})
-            if best is None or res.fun < best.fun - 1e-12:
-                best = res
-        assert best is not None
-        z = best.x
-        converged = bool(best.success) or _newton_gain(best, prob.n_obs) < 1e-4
-        if not converged:
-            warnings.append(f"ml: optimiser did not converge ({best.message})")
-        for name, v, (z_lo, z_hi) in zip(prob.znames, z, prob.bounds, strict=True):
-            if v <= z_lo + 1e-3 or v >= z_hi - 1e-3:
-                at_bound.append(name)
-                side = "lower" if v <= z_lo + 1e-3 else "upper"
-                what = ("≈ 0: no measurable contribution" if side == "lower" and
-                        prob.kind(name) == "std" else "at the edge of its plausible range")
-                warnings.append(f"ml: {name} is at its {side} search bound ({what})")
-        info = {"iterations": int(best.nit), "converged": converged,
-                "at_bound": list(at_bound)}
-    else:
-        z = np.zeros(0)
-        info = {"iterations": 0, "converged": True}
-    return z, info, warnings
 
 
 def ml(samples: Samples, model: Model, **options: Any) -> FitResult:

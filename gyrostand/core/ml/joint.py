@@ -46,8 +46,9 @@ from ..model import Model
 from ..results import Estimate, FitResult, jsonable
 from ..validate import prepare, require_samples
 from .cov import observed_covariance
-from .fit import lsq_beta, optimise, start_grid, starts_from
+from .fit import lsq_beta, start_grid, starts_from
 from .joint_problem import BIAS, JointProblem, base_name, run_key
+from .search import optimise
 
 log = logging.getLogger(__name__)
 

@@ -186,6 +186,26 @@ class JointProblem:
         ll, s2 = concentrated_loglik(S, n, slogf, self.concentrate)
         return ll, (ps, theta, s2, A)
 
+    @property
+    def analytic_score(self) -> bool:
+        """Whether :meth:`score` applies: not with the power-cycle protocol's random-effect
+        bias or absolute time (their scale is searched; central differences there)."""
+        return self.spread is None and self.trend_col is None
+
+    def score(self, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndarray:
+        """∂ ln L / ∂z of the concentrated joint ln L: each run's score at its part of
+        ``z`` and of the joint GLS ``theta`` (the common ``s2``), a shared parameter's
+        summed over the runs (:meth:`.fit.Problem.score`)."""
+        g = np.zeros(z.size)
+        for r, part in enumerate(self.parts):
+            gr = part.score(self.part_z(z, r), theta[self.lin_index[r]], s2)
+            k = 0
+            for j, (_, owner) in enumerate(self.zmap):
+                if owner is None or owner == r:
+                    g[j] += gr[k]
+                    k += 1
+        return g
+
     def _accumulate(self, G: np.ndarray, r: int, A: np.ndarray, b: np.ndarray) -> float:
         """Add run ``r``'s filtered Gram matrix ``G`` to the joint GLS: its free linear
         columns into ``A`` and ``b`` (in place), its residual sum of squares with the
