@@ -73,3 +73,15 @@ def test_the_score_vanishes_at_the_optimum_ml_reports(run):
     g = prob.score(z, theta, s2)
     inside = [i for i, n in enumerate(prob.znames) if n not in fit.info["at_bound"]]
     assert np.max(np.abs(g[inside])) < 0.05, dict(zip(prob.znames, g, strict=True))
+
+
+def test_the_search_follows_the_score_not_central_differences(run):
+    """Guard (#25): a candidate refit's search evaluates the concentrated likelihood about
+    once per L-BFGS-B step (the score is one more pass, not 2·d of them): with central
+    differences a step cost 1 + 2·3 evaluations here."""
+    base = ml(run, Model.parse("markov,temp,white,bias"))
+    r = ml(run, Model.parse("markov,temp,white,bias,temp_rate"), start=base.values,
+           grid=False, n_local=1)
+    steps, evals, starts = r.info["iterations"], r.info["evaluations"], r.info["start_points"]
+    assert steps >= 3
+    assert evals - starts <= 2 * steps + 4, (evals, starts, steps)
