@@ -159,6 +159,8 @@ class Problem:
         # regressors depend on rates, times and widths, not on noise levels or coefficients
         self.x_names = [n for n, q in model.params if q.kind not in ("std", "linear")]
         self._x_cache: dict[tuple, np.ndarray] = {}
+        #: by searched parameter, the terms whose regressors move with it (.score)
+        self.x_deps: dict[str, tuple] = {}
         # the filter's output depends on every parameter but the coefficients
         self._g_names = [n for n, q in model.params if q.kind != "linear"]
         self._g_cache: dict[tuple, tuple[np.ndarray, float, int]] = {}

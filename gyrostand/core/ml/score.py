@@ -72,13 +72,47 @@ def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndar
         dp0[j] = (a.p0 - b.p0) / (2 * STEP)
         dr[j] = (a.r - b.r) / (2 * STEP)
         if name in prob.x_names and Y.shape[1] > 1:
-            Xa = model.regressors(up, prob.ctx)
-            Xb = model.regressors(dn, prob.ctx)
-            du[j] = (Xa - Xb) @ c[1:] / (2 * STEP)
+            terms = _moved_by(prob, name, p)
+            ca, cb = _columns(prob, terms, up), _columns(prob, terms, dn)
+            for col, xa in ca.items():
+                if col in prob.linear:
+                    du[j] += (xa - cb[col]) * c[1 + prob.linear.index(col)]
+            du[j] /= 2 * STEP
     # u's NaN (a missing sample) is du's too: the kernel tests u
     g_logf, g_s = _score_run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
                              writable(prob.weights), writable(u), dphi, dq, dp0, dr, du)
     return -0.5 * (g_logf + g_s / s2)
+
+
+def _columns(prob: Problem, terms, p) -> dict[str, np.ndarray]:
+    """The regressor columns of ``terms`` alone at ``p`` (as :meth:`Model.regressors`
+    makes them: the context bound to the model's modifiers)."""
+    ctx = prob.ctx.bound(prob.model.modifiers)
+    cols: dict[str, np.ndarray] = {}
+    for t in terms:
+        cols.update(t.regressors(p, ctx))
+    return cols
+
+
+def _moved_by(prob: Problem, name: str, p) -> tuple:
+    """The terms whose regressors move with ``name`` (its own; those whose input goes
+    through the drift's process for β; those a modifier's parameter changes the
+    temperature of): found once per problem by moving ``name`` by half, so a derivative
+    recomputes those terms' columns alone (a tanh of a width, a lag's response: the
+    others are the same numbers)."""
+    deps = prob.x_deps.get(name)
+    if deps is None:
+        ctx = prob.ctx.bound(prob.model.modifiers)
+        moved = {**p, name: 1.5 * p[name]}
+        found = []
+        for t in prob.model.terms:
+            if not t.linear:
+                continue
+            a, b = t.regressors(p, ctx), t.regressors(moved, ctx)
+            if any(not np.array_equal(a[k], b[k]) for k in a):
+                found.append(t)
+        deps = prob.x_deps[name] = tuple(found)
+    return deps
 
 
 @njit(cache=True, nogil=True)
