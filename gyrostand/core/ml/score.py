@@ -74,9 +74,9 @@ def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndar
         if name in prob.x_names and Y.shape[1] > 1:
             terms = _moved_by(prob, name, p)
             ca, cb = _columns(prob, terms, up), _columns(prob, terms, dn)
-            for col, xa in ca.items():
-                if col in prob.linear:
-                    du[j] += (xa - cb[col]) * c[1 + prob.linear.index(col)]
+            for key, xa in ca.items():
+                if key in prob.linear:
+                    du[j] += (xa - cb[key]) * c[1 + prob.linear.index(key)]
             du[j] /= 2 * STEP
     # u's NaN (a missing sample) is du's too: the kernel tests u
     g_logf, g_s = _score_run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
