@@ -419,6 +419,8 @@ TEST_TEXT = {
     "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
                       "characteristic; df = coefficients)",
     "score test": "score (LM) test, χ²(df), screened: not refitted",
+    "simulated": "the LR's law simulated under the current model (a random walk it "
+                 "looks like is in it; scaled χ² from 40 replicates)",
 }
 
 

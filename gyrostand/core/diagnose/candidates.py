@@ -20,14 +20,11 @@ bound; the range's curvatures from the geometry of the efficient score process a
 current fit, :func:`shape_curvatures`). Counting the shapes in χ²(df) instead was off both ways: on
 clean 2-h cycles hysteresis's LR averaged 3.5 against χ²(3)'s 3, while temp_rate's LR was
 referred to χ²(2) where its tail is that of χ²(1) stretched by a lag range of length
-~1.3–1.5. temp_rate's test still fires at about twice its level (p < 0.05 in 10 and
-11 of 100 clean 6-h and 2-h runs; benchmarks/results/false_alarm.txt): with a lag beyond
-the drift's correlation time 1/β its lagged rate is nearly a change of the drift's thermal
-response time, so the refit moves β with it and its LR at a fixed lag is over-dispersed
-(mean 1.6–1.7 at τ = 300 s against χ²(1)'s 1, on clean 6-h cycles). Holding β at the
-current fit in that refit restored the level (5/100 and 4/100) but cost power on short
-runs (a hidden temp_rate on 1200 s lost its first rank to temp2; on a 1-h run its LR fell
-from 25.8 to 15.4), so it is not done. A joint diagnosis of several runs (a tuple of
+~1.3–1.5. temp_rate's test fires at about twice its level on clean runs (its LR at a
+fixed lag over-dispersed as β moves with it; holding β cost power on short runs:
+benchmarks/results/false_alarm.txt). A deterministic candidate beside a random term of the
+model that looks like it (a trend beside a random walk) is referred to its law simulated
+under the current fit (:mod:`.simulated`). A joint diagnosis of several runs (a tuple of
 :class:`Samples`) takes the same test, its geometry on the joint model, for a shape the
 runs share; a per-run shape (a warm-up's τ, one process per run) keeps χ² with the shapes
 counted. Other candidates with a parameter not identified under the null
@@ -68,9 +65,10 @@ from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from .crossval import held_out_score
 from .reference import moved
-from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SUP, Candidate
+from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SIM, TEST_SUP, Candidate
 from .screen import score_tests, screenable, screened_candidate, to_refit
 from .shapes import as_runs, shape_curvatures, shape_params
+from .simulated import looks_random, simulated_p
 
 log = logging.getLogger(__name__)
 _DONE_LOCK = threading.Lock()
@@ -91,8 +89,7 @@ FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, st
 def candidate_terms(model: Model) -> list[str]:
     """Known terms (built-in and plugins) not in ``model`` that can be added to it."""
     have = set(model.names)
-    return [t for t in TERMS
-            if t not in have and all(r in have for r in TERMS[t].requires)]
+    return [t for t in TERMS if t not in have and all(r in have for r in TERMS[t].requires)]
 
 
 def _extra_df(term: str) -> int:
@@ -104,8 +101,7 @@ def _extra_df(term: str) -> int:
 def _determined(r: FitResult, name: str) -> bool:
     """Whether the data determine a shape parameter of the fit ``r``: inside its search
     range and known to better than half its value."""
-    e = r.parameters[name]
-    return name not in r.info.get("at_bound", ()) and abs(e.value) >= 2.0 * e.std
+    return name not in r.info.get("at_bound", ()) and abs(r.value(name)) >= 2.0 * r.std(name)
 
 
 def _halved(term: str) -> bool:
@@ -188,15 +184,11 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
     candidate without a calibrated shape, :func:`shape_curvatures`), in the order of
     ``terms``.
 
-    The refits are independent, so they run on a thread per CPU (at most
-    :data:`MAX_THREADS`): most of their time is in the compiled Kalman filter, which
-    releases the GIL (``nogil``), so the threads run on the cores side by side (the same
-    CPU time in all; wall clock ~1/CPUs of it on an idle machine). Each fit is the same
-    deterministic computation whichever thread runs it: the results do not depend on the
-    number of threads. BLAS is held to one thread around the pool (the algebra is on
-    tiny matrices; see :func:`~gyrostand.core.ml.fit.ml`). ``lkcs``: curvatures already
-    measured (by the score screen, :mod:`.screen`), by term.
-    """
+    The refits are independent: they run on a thread per CPU (at most
+    :data:`MAX_THREADS`; the compiled filter releases the GIL), each the same computation
+    whichever thread runs it, BLAS held to one thread (tiny matrices: see
+    :func:`~gyrostand.core.ml.fit.ml`). ``lkcs``: curvatures already measured (by the
+    score screen, :mod:`.screen`), by term."""
     def one(term: str) -> tuple[FitResult | None, GyrostandError | None, float,
                                 tuple[float, ...]]:
         t0 = time.perf_counter()
@@ -217,8 +209,7 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
         return r, None, seconds, lkc
 
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    # in a worker thread (a Dask task: the batch runs one run per core already) one
-    # refit after the other, as ml's evaluator does
+    # in a worker thread (a Dask task: one run per core already) one refit after another
     main = threading.current_thread() is threading.main_thread()
     workers = min(len(terms), cpus or 1, MAX_THREADS) if main else 1
     if workers <= 1:
@@ -226,9 +217,9 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
     # the costliest first (more nonlinear parameters to search: a longer fit), so that the
     # threads finish together
     def searched(term: str) -> int:
-        bigger = model.add(term)
-        return sum(1 for k in bigger.param_names if k not in model.param_names
-                   and bigger.kind(k) in ("rate", "time", "std"))
+        big = model.add(term)
+        return sum(k not in model.param_names and big.kind(k) in ("rate", "time", "std")
+                   for k in big.param_names)
 
     order = sorted(range(len(terms)), key=lambda i: -searched(terms[i]))
     with threadpool_limits(limits=1, user_api="blas"), \
@@ -338,6 +329,10 @@ def term_test(samples: Samples | tuple[Samples, ...], model: Model, base: FitRes
         return df, sup_chi2_sf(lr, df, lkc), TEST_SUP
     df = added + _extra_df(term)
     p = chi2_sf(lr, df)
+    sim = None if isinstance(samples, tuple) or not looks_random(model, term) else \
+        simulated_p(samples, model, base, term, lr)  # beside a random look-alike
+    if sim is not None:
+        return df, sim, TEST_SIM
     if _halved(term):
         return df, 0.5 * p, TEST_MIXTURE
     return df, p, TEST_CHI2_EXTRA if _extra_df(term) else TEST_CHI2
@@ -407,9 +402,9 @@ def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candid
     each tested given the other): ``st`` explains the failure as well as ``d`` does, or
     better (``st`` significant given ``d``). Where neither is significant given the other
     they explain the same failure and the data before the nested test cannot tell them
-    apart: the held-out blocks decide (:func:`_random_explains_better`). Measured on a
-    hidden rate random walk (4-h cycles, seed 500) trend and random_walk were each not
-    significant given the other (p 1, 0.5); the trend went first, the walk then LR 0."""
+    apart: the held-out blocks decide (:func:`_random_explains_better`). ``d`` given
+    ``st`` is referred to its simulated law where ``st`` looks like it (:mod:`.simulated`:
+    a trend's LR beside a true random walk averaged 3.4-4.7, not χ²(1)'s 1)."""
     both = model.add(d.term, st.term)
     try:
         assert d.result is not None
@@ -426,6 +421,9 @@ def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candid
     # the current model, not with st in it (measured: with them, warm-up + (T − T0)²'s
     # warm-up lost to random_walk, p(warmup | random_walk) 0.0077 vs 0.0063 needed)
     p_d = chi2_sf(lr_d, df_d + _extra_df(d.term))
+    if st.result is not None and looks_random(model.add(st.term), d.term):
+        sim = simulated_p(samples, model.add(st.term), st.result, d.term, lr_d)
+        p_d = p_d if sim is None else sim
     p_s = chi2_sf(lr_s, df_s + _extra_df(st.term))
     if _halved(st.term):
         p_s *= 0.5
@@ -473,28 +471,30 @@ def order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     cache: dict[str, float] = {}
     # the deterministic candidates in their order, until one survives the stochastic one
     # (a flexible effect, e.g. a lagged rate, may lose to it where the true one would not)
+    lost = []  # those the stochastic one explains better: below it, not above
     for d in det[:COMPETITORS_TRIED]:
         if not _random_explains_better(samples, model, d, st, alpha_each, cache):
             first = d
             break
+        lost.append(dataclasses.replace(d, competes=st.term, note=f"competes with "
+                                        f"{st.term}: {st.term} explains it better"))
     else:
-        d = det[0]
-        first = st
+        d, first, lost = det[0], st, lost[1:]
     other = st if first is d else d
-    if first.term in cache and other.term in cache:
-        why = (f"predicts held-out blocks better (ln p {cache[first.term] - cache[other.term]:+.1f}"
-               f" over {other.term}); proposed first")
-    elif first is d:
-        why = "both explain the failure; proposed first"
-    else:
-        why = "explains the failure better; proposed first"
+    held = first.term in cache and other.term in cache
+    why = (f"predicts held-out blocks better (ln p {cache[first.term] - cache[other.term]:+.1f}"
+           f" over {other.term})" if held else "both explain the failure" if first is d
+           else "explains the failure better") + "; proposed first"
     marked = {d.term: dataclasses.replace(d, competes=st.term),
               st.term: dataclasses.replace(st, competes=d.term)}
     marked[first.term] = dataclasses.replace(marked[first.term], note=f"competes with "
                                              f"{other.term}: {why}")
-    marked[other.term] = dataclasses.replace(
-        marked[other.term], note=f"competes with {first.term}: tested again after it")
-    # the pair where the better of them stood: a stronger candidate stays above it
-    at = min(cands.index(first), cands.index(other))
-    rest = [c for c in cands if c.term not in (first.term, other.term)]
-    return [*rest[:at], marked[first.term], marked[other.term], *rest[at:]]
+    marked[other.term] = dataclasses.replace(marked[other.term], note=f"competes with "
+                                             f"{first.term}: tested again after it")
+    # the pair where the better of them stood (a stronger candidate stays above it), then
+    # the deterministic ones that lost to the stochastic one (measured: a trend that lost
+    # to a walk stayed on top, above the lagged temperature's warm-up that beat it)
+    moved = {first.term, other.term, *(x.term for x in lost)}
+    at = min(i for i, c in enumerate(cands) if c.term in moved)
+    rest = [c for c in cands if c.term not in moved]
+    return [*rest[:at], marked[first.term], marked[other.term], *lost, *rest[at:]]

@@ -139,3 +139,4 @@ TEST_MIXTURE = "chi2 mixture"  # ½χ²(0) + ½χ²(df): the null on a boundary
 TEST_CHI2_EXTRA = "chi2 +1 df"  # χ²(df), df with one more for a parameter unidentified
 TEST_SUP = "sup over shape"  # the supremum of a χ²(df) process over the shape (EC/Davies)
 TEST_SCORE = "score test"  # a screened candidate's LM statistic (:mod:`.screen`)
+TEST_SIM = "simulated"  # the LR's law simulated under the current model (:mod:`.simulated`)
