@@ -33,6 +33,7 @@ from gyrostand.can.binning import Bin
 from gyrostand.can.ingest import Ingest
 from gyrostand.can.logs.read import LogDamage, read_log, read_logs, read_logs_arrays
 from gyrostand.can.logs.reader import ReaderProcess, array_batches
+from gyrostand.core.threads import usable_cpus
 
 __all__ = ["read_log", "read_logs", "paced", "replay", "PARALLEL_MIN_BYTES", "LogDamage",
            "per_frame_forced", "FILE_PUMP", "PUMP"]
@@ -147,10 +148,7 @@ def replay(messages: Iterable[can.Message] | str | Path | Sequence[str | Path],
 
 def _cores() -> int:
     """CPUs this process may run on (a reader process only pays off with two or more)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
+    return usable_cpus()
 
 
 def _receive_and_pump(batches: Iterable[Any], receive: Callable[[Any], None],

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -63,6 +62,7 @@ from ..ml.joint_problem import base_name
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
+from ..threads import pool_width
 from .crossval import held_out_score
 from .reference import moved
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SIM, TEST_SUP, Candidate
@@ -208,10 +208,8 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
                 on_done(term)
         return r, None, seconds, lkc
 
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     # in a worker thread (a Dask task: one run per core already) one refit after another
-    main = threading.current_thread() is threading.main_thread()
-    workers = min(len(terms), cpus or 1, MAX_THREADS) if main else 1
+    workers = min(len(terms), pool_width(MAX_THREADS))
     if workers <= 1:
         return [one(t) for t in terms]
     # the costliest first (more nonlinear parameters to search: a longer fit), so that the

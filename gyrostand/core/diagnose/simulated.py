@@ -22,8 +22,6 @@ The replicates' seeds are fixed, so ``diagnose``, ``fit`` and the ledger give th
 
 from __future__ import annotations
 
-import os
-import threading
 import zlib
 from concurrent.futures import ThreadPoolExecutor
 
@@ -37,6 +35,7 @@ from ..kalman import first_order_response
 from ..ml.fit import ml
 from ..model import Model
 from ..results import FitResult
+from ..threads import pool_width
 from .prederror import deterministic_part
 
 __all__ = ["SIM_REPLICATES", "SIMULATED", "looks_random", "null_replicate", "simulated_p"]
@@ -107,8 +106,7 @@ def simulated_p(samples: Samples, model: Model, base: FitResult, term: str, lr: 
         assert r0.loglik is not None and r1.loglik is not None
         return max(2.0 * (r1.loglik - r0.loglik), 0.0)
 
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = min(cpus or 1, 4) if threading.current_thread() is threading.main_thread() else 1
+    workers = pool_width(4)
     with threadpool_limits(limits=1, user_api="blas"):
         if workers > 1:
             with ThreadPoolExecutor(workers, thread_name_prefix="simulated") as pool:

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import itertools
 import logging
-import os
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -39,6 +38,7 @@ from ..kalman import kf_run
 from ..model import LOG_2PI, Model, context
 from ..results import Estimate, FitResult
 from ..terms.base import POSITIVE_KINDS
+from ..threads import pool_width
 from ..validate import prepare, require_samples
 from .cov import covariance_from_hessian as covariance_from_hessian  # re-exported
 from .cov import hessian as hessian
@@ -81,10 +81,7 @@ class _Evaluator:
     """
 
     def __init__(self) -> None:
-        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
-            else (os.cpu_count() or 1)
-        main = threading.current_thread() is threading.main_thread()
-        workers = min(cpus, MAX_THREADS) if main else 1
+        workers = pool_width(MAX_THREADS)
         self.pool = ThreadPoolExecutor(workers, thread_name_prefix="ml") if workers > 1 \
             else None
 
@@ -117,6 +114,12 @@ class Problem:
         self.linear = model.names_of_kind("linear")
         self.lin_free = [n for n in self.linear if n not in self.fixed]
         self.free_cols = [1 + j for j, n in enumerate(self.linear) if n not in self.fixed]
+        #: the residual's coefficients on [y, X] with the free ones at 0: [1, −θ_fixed]
+        self.c0 = np.zeros(1 + len(self.linear))
+        self.c0[0] = 1.0
+        for j, name in enumerate(self.linear):
+            if name in self.fixed:
+                self.c0[1 + j] = -self.fixed[name]
         # positive nonlinear parameters (rates 1/s and time constants s), searched in log
         self.rates = [n for n, q in model.params
                       if q.kind in POSITIVE_KINDS and n not in self.fixed]
@@ -216,11 +219,7 @@ class Problem:
         if not np.isfinite(slogf):
             return -np.inf, None
         # e = E c0 - E_free θ with c0 = [1, -θ_fixed...]: S(θ) = c0'Gc0 - 2 b'θ + θ'Aθ
-        c0 = np.zeros(G.shape[0])
-        c0[0] = 1.0
-        for j, name in enumerate(self.linear):
-            if name in self.fixed:
-                c0[1 + j] = -self.fixed[name]
+        c0 = self.c0
         S = float(c0 @ G @ c0)
         free = self.free_cols
         if free:

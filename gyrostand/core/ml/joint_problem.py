@@ -211,11 +211,7 @@ class JointProblem:
         columns into ``A`` and ``b`` (in place), its residual sum of squares with the
         fixed coefficients' columns taken off returned."""
         part = self.parts[r]
-        c0 = np.zeros(G.shape[0])
-        c0[0] = 1.0
-        for j, name in enumerate(part.linear):
-            if name in part.fixed:
-                c0[1 + j] = -part.fixed[name]
+        c0 = part.c0
         free = part.free_cols
         if free:
             idx = self.lin_index[r]

@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import listen
-from ..rts import writable
+from ..rts import sum_variance, writable
 
 if TYPE_CHECKING:
     from .fit import Problem
@@ -50,12 +50,8 @@ def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndar
     d = z.size
     model, dt = prob.model, prob.samples.dt
     Y = prob.filter_input(p)
-    c = np.zeros(Y.shape[1])
-    c[0] = 1.0
-    for j, name in enumerate(prob.linear):
-        c[1 + j] = -prob.fixed[name] if name in prob.fixed else 0.0
-    for col, v in zip(prob.free_cols, theta, strict=True):
-        c[col] = -v
+    c = prob.c0.copy()
+    c[prob.free_cols] = -theta
     u = Y @ c
     ss = model.state_space(p, dt)
     n = ss.phi.size
@@ -156,13 +152,7 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
                 steady = False
             if not steady:
                 f_last = f
-                f = rk
-                for i in range(n):
-                    s = 0.0
-                    for a in range(n):
-                        s += P[i, a]
-                    PH[i] = s
-                    f += s
+                f = sum_variance(P, PH, rk)  # f = 1'P1 + R_k, PH = P1
                 if f <= 0.0:
                     return g_logf * np.nan, g_s * np.nan
                 for i in range(n):
