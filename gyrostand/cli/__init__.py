@@ -124,6 +124,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 #: parallel work runs on the commands' own threads (candidate refits, ML evaluations) and
 #: processes (replay's reader, batch workers). A value the user set is kept.
 _ONE_THREAD = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
+#: commands whose first run compiles ML's score and the smoother: started in a second
+#: process while the command compiles the filter (gyrostand.core.prewarm)
+PREWARM_COMMANDS = frozenset({"diagnose", "fit", "report", "demo"})
 
 
 def _main(argv: Sequence[str] | None = None) -> int:
@@ -145,6 +148,10 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from .compiling import show_compilations
 
         show_compilations()
+    if args.command in PREWARM_COMMANDS:  # a first run: kernels compiled on the other core
+        from ..core import prewarm
+
+        prewarm.start(("score_run", "rts"))
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     for h in logging.getLogger().handlers:  # a run's run.log may lower gyrostand's level

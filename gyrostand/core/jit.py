@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cache_dir", "choose_cache_dir", "listen", "user_cache_dir", "watch"]
+__all__ = ["cache_dir", "choose_cache_dir", "expect", "expecting", "listen", "ready", "user_cache_dir",
+           "watch"]
 
 #: the folders whose kernels numba caches beside their source by default
 KERNEL_DIRS = (Path(__file__).resolve().parent, Path(__file__).resolve().parent / "lkf")
@@ -104,3 +106,31 @@ def listen() -> None:
 
     event.register("numba:compile", _Forward())
     _state["listening"] = True
+
+
+#: kernels another process compiles for this one (:mod:`.prewarm`), each with the event
+#: set when it is in the cache (or the other process is gone)
+_expected: dict[str, threading.Event] = {}
+#: the longest a first call waits for the other process's kernel (s), then compiles it
+EXPECT_WAIT_S = 120.0
+
+
+def expect(names: list[str]) -> dict[str, threading.Event]:
+    """Note that another process is compiling the kernels ``names`` into the cache; set
+    each returned event when it is there (or will not be)."""
+    for n in names:
+        _expected.setdefault(n, threading.Event())
+    return {n: _expected[n] for n in names}
+
+
+def expecting(name: str) -> bool:
+    """Whether another process was asked to compile kernel ``name`` (:func:`expect`)."""
+    return name in _expected
+
+
+def ready(name: str) -> None:
+    """Before a first call of kernel ``name``: wait while another process still compiles
+    it (:mod:`.prewarm`), so this one loads it from the cache instead of compiling it."""
+    ev = _expected.get(name)
+    if ev is not None and not ev.is_set():
+        ev.wait(EXPECT_WAIT_S)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import listen
+from .jit import listen, ready
 from .rts import joseph_covariance, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
 
@@ -231,6 +231,7 @@ def kf_filtered_states(phi, q, p0, r, rw, y):
     forward pass computes them (one compiled kernel for both: a first run compiles one
     less).
     """
+    ready("rts")  # a first run: compiled beside this process (.prewarm)
     return rts_forward(writable(phi), writable(q), writable(p0), float(r), writable(rw),
                        writable(y))[2]
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import listen
+from .jit import listen, ready
 
 listen()  # a compilation is shown as progress (jit.watch)
 
@@ -92,6 +92,7 @@ def kf_smooth(phi, q, p0, r, rw, y):
     ``outer`` and ``sum(axis)`` cost this kernel 11-14 s of compilation on a first run;
     these loops compile in about a second).
     """
+    ready("rts")  # a first run: compiled beside this process (.prewarm)
     phi = writable(phi)
     xp, Pp, xf, Pf = rts_forward(phi, writable(q), writable(p0), float(r), writable(rw),
                                   writable(y))
@@ -206,3 +207,14 @@ def _rts_backward(xp, Pp, xf, Pf, J):  # pragma: no cover - compiled
         s[k] = tot_x
         v[k] = tot_p
     return s, v
+
+
+#: this module's compiled kernels (:mod:`.prewarm` asks numba's cache for them)
+KERNELS = (rts_forward, _rts_backward)
+
+
+def warm() -> None:
+    """Compile the smoother's two passes for the argument types :func:`kf_smooth` passes
+    (a first run's second process, :mod:`.prewarm`)."""
+    one = np.ones(2)
+    kf_smooth(0.9 * one, 0.1 * one, one, 0.1, np.zeros(0), np.ones(8))

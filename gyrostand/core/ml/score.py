@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from ..jit import listen
+from ..jit import listen, ready
 from ..rts import sum_variance, writable
 
 if TYPE_CHECKING:
@@ -75,6 +75,7 @@ def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndar
                     du[j] += (xa - cb[key]) * c[1 + prob.linear.index(key)]
             du[j] /= 2 * STEP
     # u's NaN (a missing sample) is du's too: the kernel tests u
+    ready("score_run")  # a first run: compiled beside this process (..prewarm)
     g_logf, g_s = _score_run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
                              writable(prob.weights), writable(u), dphi, dq, dp0, dr, du)
     return -0.5 * (g_logf + g_s / s2)
@@ -223,3 +224,16 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
                     P[a, b] *= phi[a] * phi[b]
                 P[a, a] += q[a]
     return g_logf, g_s
+
+
+#: this module's compiled kernels (:mod:`..prewarm` asks numba's cache for them)
+KERNELS = (_score_run,)
+
+
+def warm() -> None:
+    """Compile :func:`_score_run` for the argument types :func:`score` passes (a first
+    run's second process, :mod:`..prewarm`)."""
+    n, d, N = 2, 2, 8
+    one = np.ones(n)
+    _score_run(0.9 * one, 0.1 * one, one, 0.1, np.zeros(0), np.ones(N), np.zeros((d, n)),
+               np.zeros((d, n)), np.zeros((d, n)), np.zeros(d), np.zeros((d, N)))
