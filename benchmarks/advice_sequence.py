@@ -61,6 +61,9 @@ CUBIC = {"cubic in T (outside)": 6e-5, "cubic in T, weak": 2e-5}
 #: terms a sequence may add on a cubic: its quadratic part is temp2's
 CUBIC_PARTS = {"temp2"}
 MAX_STEPS = 6
+#: the acceptance's unexplained share of the open-loop error before the right term, and its
+#: fall once the right term is in
+SHARE_MIN, FALL_MIN = 0.5, 0.7
 
 
 def data(kind: str, seed: int, tmp: Path) -> Samples:
@@ -171,12 +174,16 @@ def main() -> None:
                     fall_all.append(1 - every[0][1] / errs[0][1])
             line = f"{kind:<24} right {right}/{seeds}"
             if share:
-                line += f"; unexplained share before {np.min(share):.0%}..{np.max(share):.0%}"
+                line += (f"; unexplained share before {np.min(share):.0%}..{np.max(share):.0%}"
+                         f" (>= 50 % in {sum(x >= SHARE_MIN for x in share)}/{len(share)})")
             if fall:
-                line += f"; unexplained falls after the first right term {np.min(fall):.0%}.." \
-                        f"{np.max(fall):.0%}"
+                line += (f"; unexplained falls after the first right term {np.min(fall):.0%}.."
+                         f"{np.max(fall):.0%} (>= 70 % in {sum(x >= FALL_MIN for x in fall)}/"
+                         f"{len(fall)})")
             if fall_all:
-                line += f"; after all true terms {np.min(fall_all):.0%}..{np.max(fall_all):.0%}"
+                line += (f"; after all true terms {np.min(fall_all):.0%}..{np.max(fall_all):.0%}"
+                         f" (>= 70 % in {sum(x >= FALL_MIN for x in fall_all)}/"
+                         f"{len(fall_all)})")
             line += f" ({(time.perf_counter() - t0) / seeds:.0f} s a run)"
             print(line + ("\n    " + "; ".join(wrong) if wrong else ""), flush=True)
 
