@@ -136,7 +136,7 @@ def model_error(rep: DiagnoseResult) -> str:
     return (f"<p><b>Model error</b> (measured − the model driven by the temperature alone, "
             f"RMS of {h['window_s']:g}-s means over the run): {num(h['rms'])} "
             f"{e(me.unit)}; the floor the model's own noise leaves: {num(h['floor'])}; "
-            f"unexplained √(error² − floor²): {num(h['unexplained'])}; fit "
+            f"unexplained √(error² − floor²), 0 at floor: {num(h['unexplained'])}; fit "
             f"{num(h['fit_percent'], '.1f')} %.</p>")
 
 
