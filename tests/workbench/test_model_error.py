@@ -12,6 +12,7 @@ import pytest
 
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
+from gyrostand.core.diagnose.reference import reference_fit
 from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.kalman import kf_run
 from gyrostand.core.ml.fit import ml
@@ -68,6 +69,25 @@ def test_model_error_sits_at_its_floor_for_data_that_follow_the_model(tmp_path):
     assert err.entries[(1.0, 60.0)][0]["rms"] < 0.2 * err.entries[(0.0, 60.0)][0]["rms"]
     assert err.at_floor()
     assert err.headline()["fit_percent"] > 50
+    # within the floor's spread nothing is unexplained; beyond it, the part above the floor
+    for rows in err.entries.values():
+        for row in rows:
+            if row["rms"] is None or row["floor_limit"] is None:
+                continue
+            if row["rms"] <= row["floor_limit"]:
+                assert row["unexplained"] == 0.0, row
+            else:
+                assert row["unexplained"] == pytest.approx(
+                    np.sqrt(row["rms"] ** 2 - row["floor"] ** 2)), row
+    assert err.headline()["unexplained"] == 0.0
+    hidden = Samples.read_csv(chamber_run(tmp_path, ["temp_rate"], VISIBLE["temp_rate"],
+                                          seed=100))
+    base = ml(hidden, Model.parse("markov,temp,bias"))
+    # the floor from the saturated reference's random part, as diagnose takes it
+    h = fit_error(base, hidden, reference=reference_fit(hidden, base.model, base)).headline()
+    assert not h["at_floor"]
+    assert h["unexplained"] == pytest.approx(np.sqrt(h["rms"] ** 2 - h["floor"] ** 2))
+    assert h["unexplained"] > 0.5 * h["rms"]
 
 
 def test_diagnose_json_has_the_model_error_contract(tmp_path, capsys):
