@@ -396,11 +396,13 @@ def _held_out(samples: Samples, model: Model, c: Candidate, cache: dict[str, flo
 
 def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candidate,
                         alpha_each: float) -> bool:
-    """Whether ``d`` is not significant beside ``st`` (both fitted, each tested given the
-    other) while ``st`` is; where neither is, whether ``st`` explains the same failure
-    better alone (AIC; the held-out blocks must agree, :func:`_random_explains_better`).
-    ``d`` given ``st`` is referred to its simulated law where ``st`` looks like it
-    (:mod:`.simulated`: a trend's LR beside a true walk averaged 3.4-4.7, not χ²(1)'s 1)."""
+    """Whether ``d`` is not significant once ``st`` is in the model (both fitted together,
+    each tested given the other): ``st`` explains the failure as well as ``d`` does, or
+    better (``st`` significant given ``d``). Where neither is significant given the other
+    they explain the same failure and the data before the nested test cannot tell them
+    apart: the held-out blocks decide (:func:`_random_explains_better`). ``d`` given
+    ``st`` is referred to its simulated law where ``st`` looks like it (:mod:`.simulated`:
+    a trend's LR beside a true random walk averaged 3.4-4.7, not χ²(1)'s 1)."""
     both = model.add(d.term, st.term)
     try:
         assert d.result is not None
@@ -425,11 +427,7 @@ def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candid
         p_s *= 0.5
     log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
              d.term, st.term, p_d, st.term, d.term, p_s)
-    if p_d < alpha_each or p_s < alpha_each:
-        return p_d >= alpha_each  # d needed beside st, or st needed and d not
-    # neither significant given the other: the better alone by AIC (lr_d − lr_s = 2 Δln L)
-    # (a hidden trend: p(walk | trend) 0.5, the held-out blocks had put the walk first)
-    return lr_d - lr_s <= 2.0 * ((df_d + _extra_df(d.term)) - (df_s + _extra_df(st.term)))
+    return p_d >= alpha_each
 
 
 def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
