@@ -28,8 +28,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cache_dir", "choose_cache_dir", "expect", "expecting", "listen", "ready", "user_cache_dir",
-           "watch"]
+__all__ = ["cache_dir", "choose_cache_dir", "expect", "expecting", "listen", "ready",
+           "user_cache_dir", "watch"]
 
 #: the folders whose kernels numba caches beside their source by default
 KERNEL_DIRS = (Path(__file__).resolve().parent, Path(__file__).resolve().parent / "lkf")

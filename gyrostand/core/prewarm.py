@@ -16,11 +16,10 @@ Measured (``benchmarks/first_run.py``): an empty-cache ``diagnose`` 11.5 → 7.7
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from types import ModuleType
 
 from . import jit, rts
@@ -57,7 +56,7 @@ def start(names: Iterable[str]) -> list[str]:
         child = subprocess.Popen(
             [sys.executable, "-m", "gyrostand.core.prewarm", *missing],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-            text=True, env=dict(os.environ))
+            text=True)  # this process's environment: the same NUMBA_CACHE_DIR
     except OSError:
         return []
     events = jit.expect(missing)
@@ -76,12 +75,12 @@ def start(names: Iterable[str]) -> list[str]:
     return missing
 
 
-def main(argv: list[str], out: Callable[[str], None] = print) -> int:
+def main(argv: list[str]) -> int:
+    """The child: compile each named kernel, then report it on stdout (``ready NAME``)."""
     for name in argv:
         if name in KERNELS:
             KERNELS[name].warm()
-            out(f"ready {name}")
-            sys.stdout.flush()
+            print(f"ready {name}", flush=True)
     return 0
 
 

@@ -178,8 +178,8 @@ class ModelError:
     run first, then each segment) with ``rms``, ``max``, ``fit_percent``, ``n_windows``,
     ``floor`` (RMS for data following the model), ``floor_limit`` (its 99 % point) and
     ``unexplained`` = √max(rms² − floor², 0) where rms is above its floor limit, 0 at floor
-(:func:`_unexplained`). ``open_loop`` (N,) is y − d, ``simulated``
-    the open-loop model d.
+    (:func:`_unexplained`). ``open_loop`` (N,) is y − d, ``simulated`` the open-loop
+    model d.
     """
 
     unit: str
