@@ -118,7 +118,12 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
 
     Steady state as :func:`~gyrostand.core.kalman._kf_run`'s, exactly: once two consecutive
     observed samples with the same R start from bit-identical P and ∂P, the gains, f and
-    their derivatives repeat, and only the states and their derivatives are updated."""
+    their derivatives repeat, and only the states and their derivatives are updated.
+
+    P and ∂P are symmetric (diagonal at the start, every update symmetric in a, b): the
+    upper triangle is computed and mirrored, the same floating-point numbers as the whole
+    square (each entry's products and sums commute exactly); with 2 states 5.4 -> 4.2 ms
+    on a 6-h run."""
     n = phi.shape[0]
     d = dphi.shape[0]
     N = u.shape[0]
@@ -171,7 +176,7 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
                         dK[j, i] = (dPH[j, i] - K[i] * fj) / f
                 same = rk == r_last and f == f_last
                 for a in range(n):
-                    for b in range(n):
+                    for b in range(a, n):
                         if same and P[a, b] != P_last[a, b]:
                             same = False
                         P_last[a, b] = P[a, b]
@@ -200,12 +205,16 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
                 # P⁺ = P − (P1)(P1)'/f and its derivative (from P, before it changes)
                 for j in range(d):
                     for a in range(n):
-                        for b in range(n):
-                            dP[j, a, b] += (-(dPH[j, a] * PH[b] + PH[a] * dPH[j, b])
-                                            + PH[a] * PH[b] * df[j] / f) / f
+                        for b in range(a, n):
+                            v = dP[j, a, b] + (-(dPH[j, a] * PH[b] + PH[a] * dPH[j, b])
+                                               + PH[a] * PH[b] * df[j] / f) / f
+                            dP[j, a, b] = v
+                            dP[j, b, a] = v
                 for a in range(n):
-                    for b in range(n):
-                        P[a, b] -= PH[a] * PH[b] / f
+                    for b in range(a, n):
+                        v = P[a, b] - PH[a] * PH[b] / f
+                        P[a, b] = v
+                        P[b, a] = v
         # predict (diagonal F); ∂ from the updated P, x
         for j in range(d):
             for a in range(n):
@@ -215,13 +224,17 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du):  # pragma: no cover
         if not steady:
             for j in range(d):
                 for a in range(n):
-                    for b in range(n):
-                        dP[j, a, b] = ((dphi[j, a] * phi[b] + phi[a] * dphi[j, b]) * P[a, b]
-                                       + phi[a] * phi[b] * dP[j, a, b])
+                    for b in range(a, n):
+                        v = ((dphi[j, a] * phi[b] + phi[a] * dphi[j, b]) * P[a, b]
+                             + phi[a] * phi[b] * dP[j, a, b])
+                        dP[j, a, b] = v
+                        dP[j, b, a] = v
                     dP[j, a, a] += dq[j, a]
             for a in range(n):
-                for b in range(n):
-                    P[a, b] *= phi[a] * phi[b]
+                for b in range(a, n):
+                    v = P[a, b] * (phi[a] * phi[b])
+                    P[a, b] = v
+                    P[b, a] = v
                 P[a, a] += q[a]
     return g_logf, g_s
 
