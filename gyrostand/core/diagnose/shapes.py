@@ -148,13 +148,16 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         the current model already explains wholly gives a zero column."""
         blocks = []
         for ctx, used, p0, ok, scale, _, _ in parts:
-            cols_r = [owner.regressors({**p0, **{n: float(np.exp(v)) for n, v in
-                                                 zip(shapes, z, strict=True)}}, ctx)[lin]
-                      for z in zs]
-            # through the filter :data:`FILTER_COLUMNS` at a time (memory)
-            C = np.empty((int(ok.sum()), len(cols_r)))
-            for i in range(0, len(cols_r), FILTER_COLUMNS):
-                part = np.column_stack(cols_r[i:i + FILTER_COLUMNS])
+            # through the filter :data:`FILTER_COLUMNS` at a time (memory), each block's
+            # regressors written into the filter's input as they are made
+            C = np.empty((int(ok.sum()), len(zs)))
+            for i in range(0, len(zs), FILTER_COLUMNS):
+                chunk = zs[i:i + FILTER_COLUMNS]
+                part = np.empty((ctx.t.size, len(chunk)))
+                for j, z in enumerate(chunk):
+                    part[:, j] = owner.regressors(
+                        {**p0, **{n: float(np.exp(v)) for n, v in
+                                  zip(shapes, z, strict=True)}}, ctx)[lin]
                 C[:, i:i + part.shape[1]] = \
                     model.filter_columns(p0, used, part)[0][ok, 1:]
             C *= scale[:, None]
