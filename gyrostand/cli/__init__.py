@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from .. import __version__, exitcodes
+from . import heap
 from ..errors import GyrostandError
 
 #: the subcommands, in ``--help`` order: each is the module of its name here, whose
@@ -148,6 +149,8 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from .compiling import show_compilations
 
         show_compilations()
+    if args.command in heap.COMMANDS and argv is None:  # a process of its own: see .heap
+        heap.keep_heap()
     if args.command in PREWARM_COMMANDS:  # a first run: kernels compiled on the other core
         from ..core import prewarm
 
