@@ -13,8 +13,8 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from .. import __version__, exitcodes
-from . import heap
 from ..errors import GyrostandError
+from . import heap
 
 #: the subcommands, in ``--help`` order: each is the module of its name here, whose
 #: ``add_parser`` adds it (imported when a parser with it is built)

@@ -80,13 +80,13 @@ def test_the_fit_step_gives_the_diagnose_number(tmp_path):
 
 
 def test_a_deterministic_candidate_that_lost_to_the_walk_goes_below_it(monkeypatch):
-    """The competition's order (candidates.order_competitors): a trend the walk explains
+    """The competition's order (competitors.order_competitors): a trend the walk explains
     better does not stay on top when a later deterministic candidate (a warm-up) survives
     the walk; the table reads warm-up, walk, trend. (Measured before: a lagged temperature
     and a walk, seed 501, listed trend first, and the advice added it.) Which candidate
     wins is stubbed here: the decision itself is the simulated and held-out evidence
     measured above and in benchmarks/advice_sequence.py."""
-    from gyrostand.core.diagnose import candidates as C
+    from gyrostand.core.diagnose import competitors as C
     from gyrostand.core.diagnose.results import Candidate
 
     def cand(term: str, lr: float, stochastic: bool = False) -> Candidate:
@@ -106,3 +106,37 @@ def test_a_deterministic_candidate_that_lost_to_the_walk_goes_below_it(monkeypat
     beaten = {"trend", "warmup"}
     out = C.order_competitors(None, WALK, cands, 0.0071)  # type: ignore[arg-type]
     assert [c.term for c in out] == ["random_walk", "trend", "warmup", "markov2"]
+
+
+def test_a_tie_says_so_and_what_tells_them_apart(monkeypatch):
+    """Neither candidate significant given the other (both fitted together) is a tie that
+    no likelihood test on this record breaks (a trend against a rate random walk on 4-h
+    runs: 20 of 20 seeds, benchmarks/results/advice_oracle.txt): the note of the one
+    proposed first says so, with what separates them; where the walk is significant given
+    the trend it does not."""
+    from gyrostand.core.diagnose import competitors as C
+    from gyrostand.core.diagnose.results import Candidate
+
+    def cand(term: str, lr: float, stochastic: bool = False) -> Candidate:
+        return Candidate(term=term, lr_stat=lr, df=1, p_value=1e-6, delta_aic=-lr,
+                         delta_bic=-lr, rms_after=0.02, loglik_after=lr / 2, effect={},
+                         seconds=0.0, stochastic=stochastic)
+
+    cands = [cand("trend", 30.0), cand("random_walk", 25.0, True)]
+    p_walk = {"value": 0.5}
+
+    def evidence(s, m, d, st, a, cache):  # what _nested_says_random and the blocks give
+        cache.update({f"p:{d.term}|{st.term}": 0.32, f"p:{st.term}|{d.term}": p_walk["value"],
+                      d.term: 100.0, st.term: 104.5})
+        return True
+
+    monkeypatch.setattr(C, "_random_explains_better", evidence)
+    out = C.order_competitors(None, WALK, cands, 0.0071)  # type: ignore[arg-type]
+    assert [c.term for c in out] == ["random_walk", "trend"]
+    assert "ln p +4.5 over trend" in out[0].note
+    assert "a tie on this record (neither significant given the other: p 0.32, 0.5)" \
+        in out[0].note
+    assert "a trend keeps its rate, a random walk wanders" in out[0].note
+    p_walk["value"] = 0.001  # the walk significant given the trend: no tie
+    out = C.order_competitors(None, WALK, cands, 0.0071)  # type: ignore[arg-type]
+    assert out[0].term == "random_walk" and "tie" not in out[0].note

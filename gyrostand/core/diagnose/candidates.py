@@ -38,12 +38,12 @@ data do not determine (at a search bound, or |estimate| < 2 std) is not counted 
 fit is then the term's plain shape, whose one coefficient is what it adds (as in Laplace's
 approximation behind BIC, ln n per parameter is the price of a parameter the data pin down; one
 they leave free costs ~nothing). ``Candidate.n_params`` is the count used. The verdict is
-:mod:`.verdict`'s.
+:mod:`.verdict`'s; the order of a deterministic and a random candidate that explain the
+same failure, :mod:`.competitors`'.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import threading
 import time
@@ -63,7 +63,6 @@ from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from ..threads import pool_width
-from .crossval import held_out_score
 from .reference import moved
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SIM, TEST_SUP, Candidate
 from .screen import score_tests, screenable, screened_candidate, to_refit
@@ -80,8 +79,8 @@ MAX_THREADS = 4
 #: ln L rise that shows the current fit was not at its maximum
 REFIT_GAIN = 0.05
 #: the test's null hypothesis and the look-alikes are facts of each term
-#: (:attr:`~gyrostand.core.terms.base.Term.null`, ``look_alikes``): see :func:`_extra_df`,
-#: :func:`_halved` and :func:`look_alikes`
+#: (:attr:`~gyrostand.core.terms.base.Term.null`, ``look_alikes``): see :func:`extra_df`,
+#: :func:`halved` and :func:`look_alikes`
 FALLBACK_ADVICE = ("a profile with ramps of several rates in both directions, steps and "
                    "long soaks, repeated")
 
@@ -92,7 +91,7 @@ def candidate_terms(model: Model) -> list[str]:
     return [t for t in TERMS if t not in have and all(r in have for r in TERMS[t].requires)]
 
 
-def _extra_df(term: str) -> int:
+def extra_df(term: str) -> int:
     """One more degree of freedom for a term with a parameter not identified under the
     null (Davies 1987): measured false alarms of ``temp_lag`` at 2 of 4 seeds without."""
     return 1 if term_class(term).null == "nuisance" else 0
@@ -104,7 +103,7 @@ def _determined(r: FitResult, name: str) -> bool:
     return name not in r.info.get("at_bound", ()) and abs(r.value(name)) >= 2.0 * r.std(name)
 
 
-def _halved(term: str) -> bool:
+def halved(term: str) -> bool:
     """The null on the boundary of the parameter space: ½χ²(0) + ½χ²(df)."""
     return term_class(term).null == "boundary"
 
@@ -325,15 +324,15 @@ def term_test(samples: Samples | tuple[Samples, ...], model: Model, base: FitRes
         # the supremum of a χ² process over the shape (not identified under the null)
         df = added - len(shapes)
         return df, sup_chi2_sf(lr, df, lkc), TEST_SUP
-    df = added + _extra_df(term)
+    df = added + extra_df(term)
     p = chi2_sf(lr, df)
     sim = None if isinstance(samples, tuple) or not looks_random(model, term) else \
         simulated_p(samples, model, base, term, lr)  # beside a random look-alike
     if sim is not None:
         return df, sim, TEST_SIM
-    if _halved(term):
+    if halved(term):
         return df, 0.5 * p, TEST_MIXTURE
-    return df, p, TEST_CHI2_EXTRA if _extra_df(term) else TEST_CHI2
+    return df, p, TEST_CHI2_EXTRA if extra_df(term) else TEST_CHI2
 
 
 def look_alikes(cands: list[Candidate], alpha_each: float) -> list[dict[str, Any]]:
@@ -380,119 +379,3 @@ def refit_from_candidates(samples: Samples, model: Model, fit: FitResult,
                                                                                 -np.inf)):
             best = r
     return best
-
-
-#: deterministic candidates tried, in their order, against the best stochastic one
-COMPETITORS_TRIED = 3
-
-
-def _held_out(samples: Samples, model: Model, c: Candidate, cache: dict[str, float]) -> float:
-    """:func:`~.crossval.held_out_score` of ``model + c``, once per candidate."""
-    if c.term not in cache:
-        assert c.result is not None
-        cache[c.term] = held_out_score(samples, model.add(c.term), c.result.values)
-    return cache[c.term]
-
-
-def _nested_says_random(samples: Samples, model: Model, d: Candidate, st: Candidate,
-                        alpha_each: float) -> bool:
-    """Whether ``d`` is not significant once ``st`` is in the model (both fitted together,
-    each tested given the other): ``st`` explains the failure as well as ``d`` does, or
-    better (``st`` significant given ``d``). Where neither is significant given the other
-    they explain the same failure and the data before the nested test cannot tell them
-    apart: the held-out blocks decide (:func:`_random_explains_better`). ``d`` given
-    ``st`` is referred to its simulated law where ``st`` looks like it (:mod:`.simulated`:
-    a trend's LR beside a true random walk averaged 3.4-4.7, not χ²(1)'s 1)."""
-    both = model.add(d.term, st.term)
-    try:
-        assert d.result is not None
-        r = ml(samples, both, start=d.result.values, n_local=2)
-    except GyrostandError:
-        return False
-    if r.loglik is None:
-        return False
-    df_d = len(both.param_names) - len(model.add(st.term).param_names)
-    df_s = len(both.param_names) - len(model.add(d.term).param_names)
-    lr_d = max(2.0 * (r.loglik - st.loglik_after), 0.0)
-    lr_s = max(2.0 * (r.loglik - d.loglik_after), 0.0)
-    # here the shapes are counted in df: the curvatures of d's shape were measured under
-    # the current model, not with st in it (measured: with them, warm-up + (T − T0)²'s
-    # warm-up lost to random_walk, p(warmup | random_walk) 0.0077 vs 0.0063 needed)
-    p_d = chi2_sf(lr_d, df_d + _extra_df(d.term))
-    if st.result is not None and looks_random(model.add(st.term), d.term):
-        sim = simulated_p(samples, model.add(st.term), st.result, d.term, lr_d)
-        p_d = p_d if sim is None else sim
-    p_s = chi2_sf(lr_s, df_s + _extra_df(st.term))
-    if _halved(st.term):
-        p_s *= 0.5
-    log.info("competing %s/%s: p(%s | %s) = %.3g, p(%s | %s) = %.3g", d.term, st.term,
-             d.term, st.term, p_d, st.term, d.term, p_s)
-    return p_d >= alpha_each
-
-
-def _random_explains_better(samples: Samples, model: Model, d: Candidate, st: Candidate,
-                            alpha_each: float, cache: dict[str, float]) -> bool:
-    """Whether the stochastic candidate ``st`` goes before the deterministic ``d``: only
-    when both kinds of evidence say so — fitted together, ``d`` is not significant given
-    ``st`` (:func:`_nested_says_random`), and ``st`` predicts held-out blocks better (:mod:`.crossval`: each refitted without the block, the block's
-    log predictive density given the data before it). The held-out score alone put a
-    random walk first on a warm-up with a T² effect (each deterministic term alone
-    leaves the other's structure, which a walk absorbs); a random walk proposed after a
-    trend it explains is tested again at the next diagnosis, where the backward check
-    (:func:`~.verdict.redundant_terms`) can name the trend redundant."""
-    if not _nested_says_random(samples, model, d, st, alpha_each):
-        return False
-    e_d, e_s = _held_out(samples, model, d, cache), _held_out(samples, model, st, cache)
-    log.info("competing %s/%s: held-out ln p %.2f vs %.2f", d.term, st.term, e_d, e_s)
-    return e_s > e_d
-
-
-def order_competitors(samples: Samples, model: Model, cands: list[Candidate],
-                       alpha_each: float) -> list[Candidate]:
-    """Physical explanations before random ones.
-
-    When a deterministic candidate d and a stochastic one s are both significant, d is
-    proposed first unless both kinds of evidence favour s (:func:`_random_explains_better`:
-    fitted together, d not significant given s while s is given d; and s predicts held-out
-    blocks of the record better, :mod:`.crossval`); when s wins, the next deterministic
-    candidate is tried (up to :data:`COMPETITORS_TRIED`), and only when none survives is s
-    the real one.
-    Either way the table says they compete; the other is tested again after the first is
-    added.
-    """
-    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    det = [c for c in sig if not c.stochastic]
-    sto = [c for c in sig if c.stochastic]
-    if not det or not sto:
-        return cands
-    st = sto[0]
-    cache: dict[str, float] = {}
-    # the deterministic candidates in their order, until one survives the stochastic one
-    # (a flexible effect, e.g. a lagged rate, may lose to it where the true one would not)
-    lost = []  # those the stochastic one explains better: below it, not above
-    for d in det[:COMPETITORS_TRIED]:
-        if not _random_explains_better(samples, model, d, st, alpha_each, cache):
-            first = d
-            break
-        lost.append(dataclasses.replace(d, competes=st.term, note=f"competes with "
-                                        f"{st.term}: {st.term} explains it better"))
-    else:
-        d, first, lost = det[0], st, lost[1:]
-    other = st if first is d else d
-    held = first.term in cache and other.term in cache
-    why = (f"predicts held-out blocks better (ln p {cache[first.term] - cache[other.term]:+.1f}"
-           f" over {other.term})" if held else "both explain the failure" if first is d
-           else "explains the failure better") + "; proposed first"
-    marked = {d.term: dataclasses.replace(d, competes=st.term),
-              st.term: dataclasses.replace(st, competes=d.term)}
-    marked[first.term] = dataclasses.replace(marked[first.term], note=f"competes with "
-                                             f"{other.term}: {why}")
-    marked[other.term] = dataclasses.replace(marked[other.term], note=f"competes with "
-                                             f"{first.term}: tested again after it")
-    # the pair where the better of them stood (a stronger candidate stays above it), then
-    # the deterministic ones that lost to the stochastic one (measured: a trend that lost
-    # to a walk stayed on top, above the lagged temperature's warm-up that beat it)
-    moved = {first.term, other.term, *(x.term for x in lost)}
-    at = min(i for i, c in enumerate(cands) if c.term in moved)
-    rest = [c for c in cands if c.term not in moved]
-    return [*rest[:at], marked[first.term], marked[other.term], *lost, *rest[at:]]

@@ -13,7 +13,7 @@ workbench then added the trend after the walk, or the trend instead of it.
 
 The test applies to the pairs of :data:`SIMULATED` (a ``trend`` beside a
 ``random_walk``): as a candidate of a model that holds the walk, and in the competition
-of the two as candidates (:func:`~.candidates.order_competitors`). Each
+of the two as candidates (:func:`~.competitors.order_competitors`). Each
 replicate is the current fit's deterministic part plus a new draw of its random part
 (its states, its measurement noise with the bins' weights, the record's missing samples
 kept missing), refitted with and without the candidate from the current fit's values.

@@ -36,11 +36,11 @@ from ..validate import prepare
 from .candidates import (
     MIN_DIAGNOSE_SAMPLES,
     look_alikes,
-    order_competitors,
     rank_candidates,
     refit_from_candidates,
     term_test,
 )
+from .competitors import order_competitors
 from .diagnostics import ResidualDiagnostics, diagnose_fit, segments
 from .prederror import ModelError, model_error
 from .reference import (
