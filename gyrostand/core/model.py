@@ -214,11 +214,16 @@ class Model:
 
     def loglik(self, p: Mapping[str, float], samples: Samples) -> float:
         """Exact Gaussian log-likelihood of the samples (prediction-error decomposition)."""
-        e, f = self.innovations(p, samples)
-        ok = np.isfinite(e)
-        if np.any(f[ok] <= 0):
-            return -np.inf
-        return float(-0.5 * np.sum(LOG_2PI + np.log(f[ok]) + e[ok] ** 2 / f[ok]))
+        return loglik_of(*self.innovations(p, samples))
+
+
+def loglik_of(e: np.ndarray, f: np.ndarray) -> float:
+    """The Gaussian log-likelihood of innovations ``e`` with variances ``f`` (NaN ``e``:
+    a missing sample), as :meth:`Model.loglik` gives it from its own innovations."""
+    ok = np.isfinite(e)
+    if np.any(f[ok] <= 0):
+        return -np.inf
+    return float(-0.5 * np.sum(LOG_2PI + np.log(f[ok]) + e[ok] ** 2 / f[ok]))
 
 
 def context(samples: Samples, model: Model | None) -> Context:

@@ -35,7 +35,7 @@ from threadpoolctl import threadpool_limits
 from ...errors import IdentificationError, ModelError
 from ..data import Samples
 from ..kalman import kf_run
-from ..model import LOG_2PI, Model, context
+from ..model import LOG_2PI, Model, context, loglik_of
 from ..results import Estimate, FitResult
 from ..terms.base import POSITIVE_KINDS
 from ..threads import pool_width
@@ -398,7 +398,8 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     warnings += more
     at_bound = info.get("at_bound", [])
     p, gls_info, ll_prof = prob.natural(z)
-    loglik = model.loglik(p, samples)
+    e, f = model.innovations(p, samples)  # once: ln L and the fit's residuals
+    loglik = loglik_of(e, f)
     if not np.isfinite(loglik):
         raise IdentificationError(f"{samples.source}: ml found no finite likelihood")
     free = [n for n in model.param_names if n not in fixed]
@@ -415,7 +416,6 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
             params[n] = Estimate(float(fixed[n]), 0.0, model.unit(n), fixed=True)
         else:
             params[n] = Estimate(float(p[n]), std[n], model.unit(n))
-    e, f = model.innovations(p, samples)
     info.update({"evaluations": prob.nevals, "concentrated_scale": prob.concentrate,
                  "start_points": len(starts)})
     return FitResult(
