@@ -64,19 +64,22 @@ def _window_index(n: int, m: int, segs: Sequence[tuple[int, int]]) -> list[np.nd
 
 
 def _prefix(x: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Prefix sums of the finite values of ``x`` and of their count."""
-    return (np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))]),
-            np.concatenate([[0], np.cumsum(ok)]))
+    """Prefix sums of the finite values of ``x`` (along its last axis: a series, or one
+    series a row) and of their count (``ok`` is every row's)."""
+    c = np.zeros((*x.shape[:-1], x.shape[-1] + 1))
+    np.cumsum(np.where(ok, x, 0.0), axis=-1, out=c[..., 1:])
+    return c, np.concatenate([[0], np.cumsum(ok)])
 
 
 def _means(x: np.ndarray, ok: np.ndarray, starts: np.ndarray, m: int,
            pre: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """Mean of the finite values of each window ``[s, s+m)``; NaN if too few are finite."""
+    """Mean of the finite values of each window ``[s, s+m)`` (of each row of ``x``); NaN
+    if too few are finite."""
     c, k = pre if pre is not None else _prefix(x, ok)
     cnt = k[starts + m] - k[starts]
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(cnt >= MIN_FILL * m, (c[starts + m] - c[starts]) / np.maximum(cnt, 1),
-                        np.nan)
+        return np.where(cnt >= MIN_FILL * m,
+                        (c[..., starts + m] - c[..., starts]) / np.maximum(cnt, 1), np.nan)
 
 
 def _predictions(y: np.ndarray, det: np.ndarray, model: Model, p: Mapping[str, float],
@@ -109,48 +112,28 @@ class _Layout:
         return _window_index(self.n, self.m[w], self.ranges)
 
 
-def _stats(err: np.ndarray, ok: np.ndarray, lay: _Layout) -> dict[float, np.ndarray]:
-    """RMS of the window means per range (run first), for each window length."""
-    out = {}
-    pre = _prefix(err, ok)
-    for w in lay.m:
-        m = lay.m[w]
-        vals = []
-        for st in lay.starts(w):
-            mm = _means(err, ok, st, m, pre) if st.size else np.zeros(0)
-            mm = mm[np.isfinite(mm)]
-            vals.append(float(np.sqrt(np.mean(mm * mm))) if mm.size else np.nan)
-        out[w] = np.array(vals)
-    return out
-
-
 #: replicates whose window statistics are taken together (one (block, N) array per
-#: horizon: 60 replicates' 240 calls of :func:`_stats` were 0.18 s of a 6-h diagnosis)
+#: horizon: 60 replicates' 240 one-series passes were 0.18 s of a 6-h diagnosis)
 REPLICATE_BLOCK = 20
 
 
-def _stats_rows(E: np.ndarray, ok: np.ndarray, lay: _Layout) -> dict[float, np.ndarray]:
-    """:func:`_stats` of each row of ``E`` (rows: replicates; every row with the same
-    missing samples ``ok``): shape (rows, ranges) per window length, the same numbers row
-    by row (the prefix sums run along each row, each window mean and each RMS over a
-    row's own windows, in the same order)."""
-    c = np.zeros((E.shape[0], E.shape[1] + 1))
-    np.cumsum(np.where(ok, E, 0.0), axis=1, out=c[:, 1:])
-    k = np.concatenate([[0], np.cumsum(ok)])
+def _stats(E: np.ndarray, ok: np.ndarray, lay: _Layout) -> dict[float, np.ndarray]:
+    """RMS of the window means per range (run first), for each window length, of each row
+    of ``E`` (rows: replicates, each with the missing samples ``ok``): shape (rows,
+    ranges). The prefix sums run along each row and each RMS over a row's own windows,
+    so a row's numbers are those of that series alone."""
+    pre = _prefix(E, ok)
     out = {}
     for w in lay.m:
         m = lay.m[w]
         vals = np.full((E.shape[0], len(lay.ranges)), np.nan)
         for j, st in enumerate(lay.starts(w)):
-            if not st.size:
-                continue
-            cnt = k[st + m] - k[st]
-            good = cnt >= MIN_FILL * m  # the same windows in every row
-            if not good.any():
-                continue
-            a, cg = st[good], cnt[good]
-            mm = np.ascontiguousarray((c[:, a + m] - c[:, a]) / cg)
-            vals[:, j] = np.sqrt(np.mean(mm * mm, axis=1))
+            mm = _means(E, ok, st, m, pre)
+            # the windows enough samples fill, each row contiguous: its RMS sums pairwise
+            # as a single series' does
+            mm = np.ascontiguousarray(mm[:, np.isfinite(mm).all(axis=0)])
+            if mm.size:
+                vals[:, j] = np.sqrt(np.mean(mm * mm, axis=1))
         out[w] = vals
     return out
 
@@ -183,7 +166,7 @@ def _replicates(model: Model, p: Mapping[str, float], samples: Samples, ok: np.n
             for h in steps:
                 errs[h][b] = s - preds[h]
         for h in steps:
-            st = _stats_rows(errs[h], ok, lay)
+            st = _stats(errs[h], ok, lay)
             for x in lay.m:
                 out[h][x].append(st[x])
     return {h: {x: np.vstack(v) for x, v in d.items()} for h, d in out.items()}
