@@ -35,7 +35,9 @@ class Candidate:
     ``score_stat``/``score_p``: its score (LM) test at the current fit (:mod:`.screen`),
     ``None`` for a candidate not screened; ``screened``: ruled out by that test and not
     refitted (then ``lr_stat``, ``df``, ``p_value`` and ΔAIC/ΔBIC are the LM test's,
-    ``effect`` is empty and the candidate is not ranked).
+    ``effect`` is empty and the candidate is not ranked); ``stand_in``: a random process
+    standing in for a deterministic misfit of temperature that the saturated reference
+    shows (:mod:`.standin`: not ranked, ``note`` says why).
     """
 
     term: str
@@ -61,10 +63,12 @@ class Candidate:
     score_stat: float | None = None
     score_p: float | None = None
     screened: bool = False
+    stand_in: bool = False
 
     @property
     def ranked(self) -> bool:
-        return self.identified and not self.at_bound and not self.screened
+        return (self.identified and not self.at_bound and not self.screened
+                and not self.stand_in)
 
     def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
         return {
@@ -80,7 +84,7 @@ class Candidate:
             "shape_lkc": list(self.shape_lkc), "n_params": self.n_params,
             "traded": list(self.traded),
             "score_stat": self.score_stat, "score_p": self.score_p,
-            "screened": self.screened,
+            "screened": self.screened, "stand_in": self.stand_in,
         }
 
 

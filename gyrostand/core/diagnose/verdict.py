@@ -49,6 +49,7 @@ from .reference import (
     reference_fit,
 )
 from .results import Candidate, DiagnoseResult
+from .standin import mark_stand_ins
 
 log = logging.getLogger(__name__)
 
@@ -215,7 +216,10 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
             ref = _reference(samples, fit)
         m = max(len(cands), 1)
         alpha_each = alpha / m
-        cands = order_competitors(samples, model, cands, alpha_each)
+        # a random process standing in for a misfit of temperature is not ranked, before
+        # it competes with anything (:mod:`.standin`)
+        cands = order_competitors(samples, model, mark_stand_ins(cands, ref, alpha_each),
+                                  alpha_each)
         if early is not None and fit is first:
             diag, err = early.result()
         else:
