@@ -48,7 +48,9 @@ def run(args: argparse.Namespace) -> int:
           + " ".join(f"{c:+.4g}·{n}" for (n, _), c in zip(f.forms, f.coef, strict=True))
           + " (normalised to peak 1); "
           + (f"score LM {f.score:.1f} at the current fit, " if f.score is not None else "")
-          + f"R² {f.r2:.3f} of the reference's curve; a ≈ {f.amplitude:.4g} {subject.unit}")
+          + f"R² {f.r2:.3f} of the reference's curve; a ≈ {f.amplitude:.4g} {subject.unit}"
+          + "".join(f"; + b{n.rsplit('^', 1)[1]}·{n} at the output, its own coefficient "
+                    f"(≈ {c:.4g} {subject.unit})" for n, _, c in f.lower))
     print(f"wrote {out.module}")
     print(f"      {out.folder / 'pyproject.toml'}")
     fit = workbench_command(args, "fit")

@@ -88,6 +88,13 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
     assert step["added"] == ["cubic_t"] and step["p_value"] < 1e-6
     a = step["parameters"]["cubic_t.a"]
     assert abs(a["value"]) > 4 * a["std"]
+    # the polynomial at the output: z³ (g, peak 1 at an end of the range) and its lower
+    # powers, each its own coefficient; 4e-5·(T − 35)³ with z = (T − 27.5)/17.55 is
+    # 0.2162 z³ − 0.2772 z² + 0.1185 z − 0.0169 (the constant is the bias's)
+    b1, b2 = step["parameters"]["cubic_t.b1"], step["parameters"]["cubic_t.b2"]
+    assert abs(a["value"]) == pytest.approx(0.2162, rel=0.1), a
+    assert b2["value"] == pytest.approx(-0.2772, rel=0.1), b2
+    assert abs(b1["value"] - 0.1185) < 3 * b1["std"], b1
     d = json.loads(diag_json)
     assert "cubic_t" in d["model"]
     assert d["reference"]["significant"] is False, d["reference"]["p_value"]

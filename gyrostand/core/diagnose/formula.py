@@ -64,6 +64,9 @@ class Formula:
     amplitude: float
     r2: float
     score: float | None = None  # the chosen forms' score statistic (score_formula)
+    #: the lower powers z^k of a polynomial shape at the output, each with its own
+    #: coefficient in the term (name, expression, one-step estimate: the drift at z = 1)
+    lower: tuple[tuple[str, str, float], ...] = ()
 
     def expression(self) -> str:
         """The shape g(x) as one Python expression in ``x`` (``np`` is numpy)."""
@@ -79,11 +82,7 @@ def _library(q: Partial) -> list[tuple[str, str, Callable[[np.ndarray], np.ndarr
     x = q.x
     lo, hi = float(x.min()), float(x.max())
     if q.variable == "T":
-        mid, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
-        out = []
-        for k in (2, 3, 4):
-            e = f"((x - {mid:.6g}) / {half:.6g}) ** {k}"
-            out.append((f"((T-{mid:.4g})/{half:.4g})^{k}", e, _fn(e)))
+        out = [_power(q, k) for k in (2, 3, 4)]
         w = max(0.02 * (hi - lo), 0.5)
         for tc in np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), N_STEPS):
             e = f"0.5 * (1 + np.tanh((x - {tc:.4g}) / {w:.3g}))"
@@ -95,6 +94,19 @@ def _library(q: Partial) -> list[tuple[str, str, Callable[[np.ndarray], np.ndarr
         e = f"np.exp(-x / {tau:.5g})"
         out.append((f"exp(-t/{tau:.0f} s)", e, _fn(e)))
     return out
+
+
+def _power(q: Partial, k: int) -> tuple[str, str, Callable[[np.ndarray], np.ndarray]]:
+    """The form z^k of the temperature, z = (T − T₀)/S over ``q``'s range."""
+    lo, hi = float(q.x.min()), float(q.x.max())
+    mid, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
+    e = f"((x - {mid:.6g}) / {half:.6g}) ** {k}"
+    return f"((T-{mid:.4g})/{half:.4g})^{k}", e, _fn(e)
+
+
+def _degree(name: str) -> int:
+    """The power k of a form z^k's name, 0 for any other form."""
+    return int(name.rsplit("^", 1)[1]) if name.startswith("((T-") and "^" in name else 0
 
 
 def _fn(expr: str) -> Callable[[np.ndarray], np.ndarray]:
@@ -151,12 +163,18 @@ def score_formula(q: Partial, samples: Samples, model: Model, base: FitResult) -
     reference's partial-effect curve instead (:func:`sparse_formula`) is at the mercy of
     its bands: measured on a hidden cubic after ``temp2`` was added, the curve's std was
     as large as its value (its T basis nearly collinear with T²), the formula two steps
-    whose term left the lack of fit as it was (LR 54 after it). ``r2`` is still the share
-    of the curve's weighted variation the chosen forms explain (shown, not used)."""
+    whose term left the lack of fit as it was (LR 54 after it). A chosen power z^k of T
+    is a polynomial's leading term: z, …, z^(k−1) come with it as ``lower``, each its own
+    coefficient in the term, at the output (one-step estimates jointly with the leading
+    form's), and the shape g keeps the leading power. ``r2`` is still the share
+    of the curve's weighted variation the forms explain (shown, not used)."""
     if q.variable not in SUPPORTED:
         raise ValueError(f"no formula library for the partial effect of {q.variable} "
                          f"(the vocabulary's rate terms cover those shapes)")
     lib = _library(q)
+    chosen = len(lib)  # the forms chosen among; the output's linear part comes after
+    if q.variable == "T":
+        lib = lib + [_power(q, 1)]
 
     def make(used: Samples) -> np.ndarray:
         x = used.temp if q.variable == "T" else used.t - used.t[0]
@@ -170,16 +188,31 @@ def score_formula(q: Partial, samples: Samples, model: Model, base: FitResult) -
         sol, *_ = np.linalg.lstsq(G[np.ix_(ii, ii)], b[ii], rcond=1e-12)
         return max(float(b[ii] @ sol), 0.0), sol
 
-    ones = {(i,): lm((i,)) for i in range(len(lib)) if G[i, i] > 0}
+    ones = {(i,): lm((i,)) for i in range(chosen) if G[i, i] > 0}
     pairs = {p: lm(p) for p in itertools.combinations(sorted(i for (i,) in ones), 2)}
     best1 = max(ones, key=lambda k: ones[k][0])
     best2 = max(pairs, key=lambda k: pairs[k][0]) if pairs else best1
     pick = best2 if (ones | pairs)[best2][0] > ones[best1][0] + PAIR_LM else best1
-    stat, coef = (ones | pairs)[pick]
+    # a power of T is a polynomial's leading term: its lower powers come with it at the
+    # output, each with its own coefficient (the model's γ and γ₂ carry them through the
+    # drift's dynamics, lagged by 1/β on a ramp: a hidden cubic's generated z³ term left
+    # the lack of fit at p 9e-5, and z³ with its lower powers in one fixed shape left it
+    # to temp_rate, which took the lag)
+    top = max((_degree(lib[i][0]) for i in pick), default=0)
+    low = tuple(sorted((i for i in range(len(lib)) if 0 < _degree(lib[i][0]) < top),
+                       key=lambda i: _degree(lib[i][0])))
+    if low:  # the shape a·g keeps the leading power (and a step, if one was chosen)
+        pick = tuple(i for i in pick if i not in low)
+        stat, sol = lm(pick + low)
+    else:
+        stat, sol = (ones | pairs)[pick]
+    coef, lower = sol[:len(pick)], tuple(
+        (lib[i][0], lib[i][1], float(c)) for i, c in zip(low, sol[len(pick):], strict=True))
     curve = _curve_fit(q, lib)
     base_rss, _ = curve(())
     shape = sum(c * lib[i][2](q.x) for c, i in zip(coef, pick, strict=True))
     peak = float(shape[np.argmax(np.abs(shape))])
     return Formula(variable=q.variable, forms=tuple((lib[i][0], lib[i][1]) for i in pick),
                    coef=tuple(float(c) for c in coef), peak=peak, amplitude=peak,
-                   r2=1.0 - curve(pick)[0] / base_rss if base_rss > 0 else 0.0, score=stat)
+                   r2=1.0 - curve(pick + low)[0] / base_rss if base_rss > 0 else 0.0,
+                   score=stat, lower=lower)
