@@ -116,7 +116,7 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         best = rep.significant[0]
         lines.append("")
         lines.append(f"next: {fit_command} --add {best.term}")
-    elif rep.reference is not None and rep.reference.significant and not rep.significant:
+    elif rep.outside:
         lines.append("")
         lines.append(f"next: {term_new_command(fit_command)}")
         lines.append("      (writes a plugin term of the shape the reference shows; review "

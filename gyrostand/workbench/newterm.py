@@ -134,12 +134,12 @@ def new_term(subject: Subject, name: str, out: Path | None = None,
     fit = ml(subject.samples, subject.model)
     ref = reference_fit(subject.samples, subject.model, fit)
     missing = [q for q in ref.missing() if q.variable in SUPPORTED]
-    if not ref.significant or not missing:
+    if not ref.reported or not missing:
         raise DataError(
             f"{subject.samples.source}: the model {subject.model} shows no significant lack "
             f"of fit in T or in time (reference p = {ref.p_value:.2g}"
             + ("; the missing shape is in dT/dt: the vocabulary's rate terms cover it"
-               if ref.significant else "") + "): there is no missing shape to write")
+               if ref.reported else "") + "): there is no missing shape to write")
     q = missing[0]
     f = score_formula(q, subject.samples, subject.model, fit)
     folder = Path(out) if out is not None else _default_folder(subject, name)

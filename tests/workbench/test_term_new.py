@@ -130,3 +130,31 @@ def test_after_temp2_the_formula_is_the_shape_beyond_it(tmp_path, capsys):
     coef = float(g.split("·")[0])
     half = float(g.split("/")[1].split(")")[0])
     assert abs(coef) == pytest.approx(a * half ** 3, rel=0.15), (line, a * half ** 3)
+
+
+def test_a_sharp_step_in_t_is_placed_and_sized_by_the_data(tmp_path):
+    # a step of 0.4 deg/h where the chamber passes 40 °C, in a 4-h run built from frames:
+    # the library's grid steps sit 0.7 °C apart and 0.7 °C wide; the chosen one's centre
+    # and width are refined by the score statistic (a grid step left LM ~160 where the
+    # refined one has ~1500, and the plugin left the lack of fit to temp_rate)
+    from gyrostand.core.diagnose.formula import score_formula
+    from gyrostand.core.diagnose.reference import reference_fit
+    from gyrostand.core.ml.fit import ml
+
+    from .framelike import frame_run
+
+    run = frame_run(tmp_path / "step.csv", seed=3, response=lambda T: 0.4 * (T > 40.0))
+    s = Samples.read_csv(run)
+    model = Model.parse("markov,temp,bias")
+    fit = ml(s, model)
+    ref = reference_fit(s, model, fit)
+    assert ref.significant
+    q = [q for q in ref.missing() if q.variable == "T"][0]
+    f = score_formula(q, s, model, fit)
+    steps = [e for n, e in f.forms if n.startswith("step at")]
+    assert steps, f.forms
+    import re
+    tc, w = map(float, re.search(r"x - ([-0-9.e]+)\) / ([0-9.e]+)\)", steps[0]).groups())
+    assert abs(tc - 40.0) < 0.1 and w <= 0.25, (tc, w)
+    # the term's drift change at the peak is the step's
+    assert abs(f.amplitude) == pytest.approx(0.4, rel=0.25), f

@@ -275,6 +275,11 @@ class Reference:
         """Whether the lack of fit is significant at the reference's level ``alpha``."""
         return self.df > 0 and self.p_value < self.alpha
 
+    @property
+    def reported(self) -> bool:
+        """Whether the lack of fit is significant at :data:`REPORT_ALPHA` (its shape shown)."""
+        return self.df > 0 and self.p_value < REPORT_ALPHA
+
     def missing(self) -> list[Partial]:
         """The groups whose partial effect is significant, largest first."""
         sig = [q for q in self.partial if q.significant]

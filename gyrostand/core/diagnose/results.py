@@ -114,6 +114,17 @@ class DiagnoseResult:
         m = max(len(self.candidates), 1)
         return [c for c in self.candidates if c.ranked and c.p_value < self.alpha / m]
 
+    @property
+    def outside(self) -> bool:
+        """Whether the failure is an effect outside the vocabulary, the ``term new`` step
+        next: not adequate, no significant candidate, and the reference's lack of fit
+        significant — at its level, or at :data:`~.reference.REPORT_ALPHA` where another
+        check failed too (as :func:`~.verdict.verdict_reasons` says)."""
+        ref = self.reference
+        return not self.adequate and not self.significant and ref is not None and (
+            ref.significant or (ref.reported and any(
+                not r.startswith("lack of fit") for r in self.reasons)))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "model": list(self.model.names),

@@ -123,16 +123,21 @@ def verdict_reasons(diag: ResidualDiagnostics, err: ModelError, ref: Reference |
             f"the open-loop model error ({h['window_s']:g}-s means) is {h['rms']:.3g} "
             f"{unit}, above its floor {h['floor']:.3g} (99 % point {h['floor_limit']:.3g}): "
             "the model does not predict the drift from the temperature")
-    if ref is not None and ref.significant:
+    if ref is not None and (ref.significant or (reasons and not sig and ref.reported)):
         shape = describe_missing(ref, unit)
         where = f" (the reference finds {'; '.join(shape)})" if shape else ""
+        level = "" if ref.significant else (
+            f" (at the report's level {REPORT_ALPHA:g}; the verdict's alone is {ref.alpha:g})")
         if sig:
             reasons.append(f"{lack_of_fit_text(ref)}{where}")
         else:
+            # also where another check failed and the lack of fit stands at the report's
+            # level only: a sharp step in T left non-white innovations and p 0.0013, and
+            # the advice had no next step
             reasons.append(
-                f"{lack_of_fit_text(ref)}{where}: no term of the vocabulary explains it — "
-                "an effect outside the vocabulary; a plugin term of that shape is the next "
-                "step (README: plugins)")
+                f"{lack_of_fit_text(ref)}{level}{where}: no term of the vocabulary explains "
+                "it — an effect outside the vocabulary; a plugin term of that shape is the "
+                "next step (README: plugins)")
     return reasons
 
 
