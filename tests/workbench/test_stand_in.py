@@ -67,3 +67,41 @@ def test_a_real_random_walk_is_not_a_stand_in(tmp_path):
     groups = {q.group: q for q in rep.reference.partial}
     assert groups["time"].significant
     assert rep.significant[0].term == "random_walk"
+
+
+def test_outside_the_vocabulary_at_the_report_level_only_beside_another_failure(
+        cubic_run, tmp_path):
+    # a lack of fit at the report's level (0.001 <= p < 0.01) is named as an effect
+    # outside the vocabulary only where another check failed too (a sharp step in T left
+    # non-white innovations and p 0.0013, and the advice had no next step); alone it does
+    # not make a model NOT ADEQUATE
+    import dataclasses
+
+    from gyrostand.core.diagnose.verdict import verdict_reasons
+    from gyrostand.report.text import diagnosis
+
+    rep = diagnose(Samples.read_csv(cubic_run), Model.parse("markov,temp,bias,temp2"))
+    assert not rep.model_error.at_floor()  # the other failure: the open-loop error
+    m = len(rep.candidates)
+
+    def reasons(p):
+        ref = dataclasses.replace(rep.reference, p_value=p)
+        return ref, verdict_reasons(rep.diagnosis, rep.model_error, ref, [], rep.alpha, m,
+                                    rep.unit)
+    ref, why = reasons(0.005)
+    assert not ref.significant and ref.reported
+    out = [r for r in why if "outside the vocabulary" in r]
+    assert len(out) == 1 and "at the report's level 0.01" in out[0], why
+    shown = dataclasses.replace(rep, reference=ref, reasons=tuple(why))
+    assert shown.outside and "term new --from" in diagnosis(shown, "run.csv",
+                                                            "gyrostand fit run.csv")
+    ref, why = reasons(0.05)
+    assert not ref.reported and not any("outside the vocabulary" in r for r in why)
+    assert not dataclasses.replace(rep, reference=ref, reasons=tuple(why)).outside
+
+    clean = diagnose(Samples.read_csv(frame_run(tmp_path / "c.csv", seed=4)),
+                     Model.parse("markov,temp,bias"))
+    assert clean.adequate
+    ref = dataclasses.replace(clean.reference, p_value=0.005)
+    assert verdict_reasons(clean.diagnosis, clean.model_error, ref, [], clean.alpha, m,
+                           clean.unit) == []
