@@ -41,6 +41,7 @@ from ..ml.fit import ml
 from ..model import Model, context
 from ..results import FitResult
 from ..terms.base import HYSTERESIS_RATE, Context, Param, Term
+from .partials import Partial, partial_effects, rank
 
 #: °C of temperature range per Legendre degree of the temperature basis (above P₁)
 DEGC_PER_DEGREE = 8.0
@@ -59,12 +60,6 @@ WARMUP_FRACTIONS = (0.03, 0.15)
 MIN_T_SPAN = 1.0
 #: a profile whose fastest rate is below this (°C/s: 0.05 °C/min) has no rate basis
 MIN_RATE = 0.05 / 60.0
-#: relative singular-value tolerance of the rank counts behind df
-RANK_TOL = 1e-7
-#: points of each partial-effect curve
-GRID = 41
-#: the groups of the basis, in the order reported
-GROUPS = ("temperature", "rate", "time")
 #: level of the lack-of-fit test in the verdict. 0.001 while its calibration is open: at
 #: 0.01 a hidden hysteresis, added with its shape fitted (τ at its bound), still showed a
 #: lack of fit (p 0.002 refitted, 0.005 at the fit's random part with the tangents) on
@@ -212,41 +207,6 @@ def reference_basis(samples: Samples, model: Model) -> type[ReferenceBasis]:
 
 
 @dataclass(frozen=True)
-class Partial:
-    """One group's partial effect in the reference: the drift's change (drift unit) as a
-    function of ``variable`` (``x``), with its standard deviation, and the Wald test that
-    the group adds nothing (``wald`` on ``df``, ``p_value``)."""
-
-    group: str
-    variable: str
-    unit: str
-    x: np.ndarray
-    effect: np.ndarray
-    std: np.ndarray
-    wald: float
-    df: int
-    p_value: float
-
-    @property
-    def significant(self) -> bool:
-        return self.p_value < 0.01
-
-    def peak(self) -> tuple[float, float, float]:
-        """(x, effect, std) where the effect is largest among the points where it is
-        clear of its band (|effect| > 2 std; all points when none is)."""
-        a = np.abs(self.effect)
-        clear = a > 2.0 * self.std
-        i = int(np.argmax(np.where(clear, a, -1.0))) if clear.any() else int(np.argmax(a))
-        return float(self.x[i]), float(self.effect[i]), float(self.std[i])
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"group": self.group, "variable": self.variable, "unit": self.unit,
-                "x": [float(v) for v in self.x], "effect": [float(v) for v in self.effect],
-                "std": [float(v) for v in self.std], "wald": self.wald, "df": self.df,
-                "p_value": self.p_value}
-
-
-@dataclass(frozen=True)
 class Reference:
     """The saturated reference beside a fit (:func:`reference_fit`).
 
@@ -295,17 +255,6 @@ class Reference:
                 "partial": [q.to_dict() for q in self.partial], "seconds": self.seconds}
 
 
-def _rank(W: np.ndarray) -> int:
-    if W.shape[1] == 0:
-        return 0
-    n = np.linalg.norm(W, axis=0)
-    W = W[:, n > 0] / n[n > 0]
-    if W.shape[1] == 0:
-        return 0
-    s = np.linalg.svd(W, compute_uv=False)
-    return int(np.sum(s > RANK_TOL * s[0]))
-
-
 def _tangent(model: Model, p, samples: Samples, name: str, ctx: Context | None = None,
              theta: np.ndarray | None = None) -> np.ndarray:
     """The model's own freedom near its fit: d(Xθ)/d ln η along the shape η ``name``."""
@@ -333,68 +282,6 @@ def _whitened(model: Model, p, samples: Samples, tangents: Mapping[str, np.ndarr
     ok = np.isfinite(E[:, 0]) & (f > 0)
     w = 1.0 / np.sqrt(f[ok])
     return E[ok, 1:] * w[:, None], E[ok, 0] * w, names
-
-
-def _partials(basis: type[ReferenceBasis], p, cov: np.ndarray, names: list[str],
-              samples: Samples, scale: float = 1.0) -> tuple[Partial, ...]:
-    """Each group's partial effect on a grid of its variable, with bands; its Wald
-    statistic divided by ``scale`` (its null mean over df)."""
-    b = basis()
-    beta = p.get("markov.beta")
-    T = np.asarray(samples.temp, dtype=float)
-    T = T[np.isfinite(T)]
-    ctx = context(samples, None)
-    rate = ctx.temp_rate
-    t = samples.t - samples.t[0]
-    out = []
-    for group in GROUPS:
-        cols = [c for c in basis.columns if c.group == group]
-        if not cols:
-            continue
-        if group == "temperature":
-            x = np.linspace(float(T.min()), float(T.max()), GRID)
-            rows = []
-            for c in cols:
-                if c.name.startswith("K"):
-                    rows.append(np.maximum(x - b.knots[int(c.name[1:])], 0.0) / b.t_half)
-                    continue
-                v = np.polynomial.legendre.legval(b.x(x), [0] * int(c.name[1:]) + [1])
-                # a soak at T: the drift settles at θ·u(T)/β (an input of dε/dt)
-                rows.append(v / beta if c.through_drift and beta else v)
-            variable, unit = "T", "degC"
-        elif group == "rate":
-            x = np.linspace(float(np.nanmin(rate)), float(np.nanmax(rate)), GRID)
-            rows = []
-            for c in cols:
-                # a steady ramp at rate r: every lag of the rate is r
-                if c.name in ("r0", "rL"):
-                    v = x / b.rate_scale
-                elif c.name in ("s0", "sL"):
-                    v = np.tanh(x / b.width)
-                else:  # rin: dT/dt into dε/dt, settled
-                    v = x / b.rate_scale / beta if beta else x / b.rate_scale
-                rows.append(v)
-            variable, unit = "dT/dt", "degC/s"
-        else:
-            x = np.linspace(0.0, float(t[-1]), GRID)
-            rows = [x / max(float(t[-1]), 1.0) if c.name == "trend"
-                    else np.exp(-x / b.taus[int(c.name[1:])]) for c in cols]
-            variable, unit = "t", "s"
-        idx = [names.index(b.key(c.name)) for c in cols]
-        theta = np.array([p[b.key(c.name)] for c in cols])
-        C = cov[np.ix_(idx, idx)]
-        G = np.array(rows).T  # (grid, cols)
-        eff = G @ theta
-        std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, C, G), 0.0))
-        # Wald: θ' C⁺ θ on the rank of C (collinear columns count once)
-        w, V = np.linalg.eigh(C)
-        keep = w > RANK_TOL * max(float(w.max()), 1e-300)
-        z = V[:, keep].T @ theta
-        wald = float(np.sum(z * z / w[keep])) / scale
-        df = int(keep.sum())
-        out.append(Partial(group, variable, unit, x, eff, std, wald, df,
-                           chi2_sf(wald, df) if df else 1.0))
-    return tuple(out)
 
 
 def _noise_names(model: Model) -> list[str]:
@@ -450,7 +337,7 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
     rss_ref = float(np.sum((wy - W @ theta) ** 2))
     lr_fixed = max(rss_cur - rss_ref, 0.0)
-    df = _rank(W) - _rank(W[:, own])
+    df = rank(W) - rank(W[:, own])
     p.update({n: float(v) for n, v in zip(names, theta, strict=True)
               if n.startswith(NAME + ".")})
     basis0, ref_model0 = basis, ref_model
@@ -492,8 +379,8 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
         theta, *_ = np.linalg.lstsq(W, wy, rcond=1e-12)
         at.update({n: float(v) for n, v in zip(names, theta, strict=True)
                    if n.startswith(NAME + ".")})
-    partial = _partials(basis0, at, np.linalg.pinv(W.T @ W, rcond=1e-12, hermitian=True),
-                        names, samples, FREE_LR_SCALE if traded else 1.0)
+    partial = partial_effects(basis0(), at, W, wy, names, samples,
+                              FREE_LR_SCALE if traded else 1.0)
     return Reference(model=ref_model, basis=basis, lr=lr, df=df, p_value=pv, alpha=alpha,
                      partial=partial, noise_model=noise_model, noise=noise, fit=fit,
                      lr_fixed=lr_fixed, noise_names=tuple(noise_names),
