@@ -241,7 +241,8 @@ def score_formula(q: Partial, samples: Samples, model: Model, base: FitResult) -
     pairs = {p: lm(p) for p in itertools.combinations(sorted(i for (i,) in ones), 2)}
     best1 = max(ones, key=lambda k: ones[k][0])
     best2 = max(pairs, key=lambda k: pairs[k][0]) if pairs else best1
-    pick = best2 if (ones | pairs)[best2][0] > ones[best1][0] + PAIR_LM else best1
+    pick: tuple[int, ...] = (best2 if (ones | pairs)[best2][0] > ones[best1][0] + PAIR_LM
+                             else best1)
     steps = [i for i in pick if lib[i][0].startswith("step at")]
     if steps:  # each chosen step's centre and width refined (a nonlinear parameter)
         lib = _refined(q, samples, model, base, lib, pick, steps)
