@@ -306,7 +306,9 @@ def lsq_beta(samples: Samples, model: Model) -> float | None:
 def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
                  ) -> list[np.ndarray]:
     """Start points from a previous fit's natural values ``start`` (by searched name), and
-    a scan of each searched rate or time the previous fit lacks."""
+    a scan of each searched rate or time the previous fit lacks; where it lacks noise
+    levels only (a random walk's q), a scan of each of them, its lower search bound (the
+    previous model itself) included."""
     # a previous fit's values; parameters it lacks start mid-grid
     z0 = []
     mid = np.mean(grid, axis=0) if grid else np.zeros(len(prob.znames))
@@ -322,8 +324,15 @@ def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
     # constant, a second correlation time): scanned over its whole range, Δt to the
     # record length, with the others at the previous fit, so the local search starts
     # in the right basin (a coarse grid alone stops at local optima)
+    lacks = [n for n in prob.znames if n not in start]
+    # a new noise level alone: its scan (measured on 4-h runs, diagnose's random_walk
+    # candidate: the same LR on 15 of 15 runs, walk or none, in 0-16 iterations instead of
+    # 13-26 — from mid-range the search crawled to the bound where the walk adds nothing);
+    # a new rate's σ with it (a second Markov process) keeps its mid-range start: scanned
+    # too, its refit found other optima both ways (LR 1.04 -> 0.003, 0 -> 45)
+    scanned = prob.rates if any(n in prob.rates for n in lacks) else [*prob.rates, *prob.stds]
     for i, n in enumerate(prob.znames):
-        if n in start or n not in prob.rates:
+        if n in start or n not in scanned:
             continue
         for v in np.linspace(prob.bounds[i][0], prob.bounds[i][1], SCAN_POINTS):
             z = z0.copy()
