@@ -27,10 +27,10 @@ from ..validate import prepare
 #: 7.1, 7.4 at 15, 41, 81, 161 points, the other edges within 1 % from 15 points. On the
 #: cli_latency 6-h run: temp_rate's length 1.1791 / 1.1782 and warmup's 3.9866 / 3.9812 at
 #: 81 / 41 points; hysteresis's (rim, area) (3.3339, 1.2272) at 81 × 15, (3.3258, 1.2266)
-#: at 81 × 9, in 0.9 and 0.55 s of CPU
-#: at 61 × 7: (8.31, 7.73) measured on the 6-h run of benchmarks/diagnose_speed.py where a
+#: at 81 × 9, in 0.9 and 0.55 s of CPU (both without extrapolation). Now 61 × 7:
+#: hysteresis's (8.25, 7.67) measured on the 6-h run of benchmarks/diagnose_speed.py where a
 #: 321 × 33 grid gives (8.40, 7.85) and 81 × 9 without the extrapolation (8.14, 7.54), in
-#: 0.3 s of CPU instead of 0.45 (each curvature is extrapolated from the grid and its
+#: 0.20 s of CPU instead of 0.34 (each curvature is extrapolated from the grid and its
 #: every other point, :func:`_extrapolated`; the sizes are odd so that it nests)
 SHAPE_POINTS = 41
 SHAPE_POINTS_2D = (61, 7)
