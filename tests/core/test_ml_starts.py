@@ -88,3 +88,29 @@ def test_the_kept_filter_input_gives_the_same_gram_as_a_fresh_problem(monkeypatc
     assert moved > 10
     # the regressors were built for p0 and for each point that moved a rate or a shape
     assert sum(builds) - 20 == 1 + shaped, (sum(builds), shaped)
+
+
+def test_a_new_noise_level_alone_is_scanned_down_to_its_bound():
+    """A refit adding a random walk (one new noise level, no new rate) scans it over its
+    range, its lower bound — the smaller model itself — included: with no walk in the data
+    the search starts at the bound and stops there, where from mid-range it crawled 13-26
+    iterations to it; with a walk it reaches the grid-started fit's optimum."""
+    base_model = Model.parse("markov,temp,bias,white")
+    bigger = base_model.add("random_walk")
+    # none: the data of the module's run (a temp_rate effect, no walk)
+    s = _run()
+    base = ml(s, base_model)
+    fast = ml(s, bigger, start=base.values, grid=False, hessian_passes=1)
+    assert fast.info["start_points"] == 1 + SCAN_POINTS
+    assert fast.info["iterations"] <= 2
+    assert abs(fast.loglik - base.loglik) < 1e-6  # the smaller model's own likelihood
+    assert "random_walk.q" in fast.info["at_bound"]
+    # a walk: the same optimum as from the whole start grid
+    w = simulate(bigger, {**TRUTH, "random_walk.q": 2e-3}, chamber_profile(2.0), seed=8)
+    w = Samples.from_arrays(w.t, w.drift, np.round(w.temp / 0.05) * 0.05)
+    base = ml(w, base_model)
+    fast = ml(w, bigger, start=base.values, grid=False, hessian_passes=1)
+    full = ml(w, bigger)
+    assert 2 * (fast.loglik - base.loglik) > 10.0  # the walk is there to find
+    assert fast.loglik >= full.loglik - 1e-3
+    assert abs(np.log(fast.values["random_walk.q"] / 2e-3)) < np.log(3)
