@@ -149,7 +149,6 @@ def test_the_efficient_score_is_the_refit_lr_at_a_fixed_shape(clean):
     assert plain < 0.8 * lr  # what the regressors-only metric missed
 
 
-
 def test_the_curvatures_are_extrapolated_to_a_fine_grid(clean, monkeypatch):
     """Polygon lengths and flat-triangle areas on the grid fall short by O(h²); extrapolated
     from the grid and its every other point (sizes odd, so the grids nest) they come within
