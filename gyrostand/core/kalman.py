@@ -133,7 +133,8 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     nb = 0
     sf = 0.0
     for k in range(N):
-        if np.isnan(Y[k, 0]):
+        missing = np.isnan(Y[k, 0])
+        if missing:
             steady = False
             r_last = np.nan
             if store:
@@ -172,8 +173,8 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     hx += X[i, c]
                 e = Y[k, c] - hx
                 e_row[c] = e
-                for i in range(n):
-                    X[i, c] += K[i] * e
+                for i in range(n):  # update, then predict: x = F (x + K e)
+                    X[i, c] = (X[i, c] + K[i] * e) * phi[i]
             if store:
                 f_out[k] = f
                 for c in range(m):
@@ -187,7 +188,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     Bk[nb, c] = e_row[c] * sf
                 nb += 1
                 if nb == BLOCK:
-                    G += Bk.T @ Bk
+                    _gram_block(G, Bk, nb)
                     nb = 0
             else:
                 for a in range(m):
@@ -196,21 +197,31 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
             if not steady:
                 # Joseph form: P = (I - K H) P (I - K H)' + K R K'
                 joseph_covariance(P, ones, K, PH, rk, A, AH)
-        # predict: x = F x ; P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
-        for i in range(n):
-            for c in range(m):
-                X[i, c] *= phi[i]
+        # predict: x = F x (an observed sample's x was predicted with its update) ;
+        # P = F P F' + Q  (F, Q diagonal; P unchanged in steady state)
+        if missing:
+            for i in range(n):
+                for c in range(m):
+                    X[i, c] *= phi[i]
         if not steady:
             for i in range(n):
                 for j in range(n):
                     P[i, j] *= phi[i] * phi[j]
                 P[i, i] += q[i]
     if nb > 0:
-        G += Bk[:nb].T @ Bk[:nb]
+        _gram_block(G, Bk, nb)
     for a in range(m):  # exactly symmetric, as the solves downstream expect
         for c in range(a):
             G[a, c] = G[c, a]
     return E, f_out, G, slogf, nobs
+
+
+@njit(cache=True, nogil=True)
+def _gram_block(G, B, nb):  # pragma: no cover - compiled
+    """G += B[:nb]' B[:nb] (one BLAS product). A function of its own, not written in
+    :func:`_kf_run`'s loop: there, the product's call made the narrow columns' sample loop
+    about 12 % slower (the same numbers either way)."""
+    G += B[:nb].T @ B[:nb]
 
 
 NO_WEIGHTS = np.zeros(0)
