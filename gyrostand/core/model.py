@@ -197,10 +197,15 @@ class Model:
 
     def filter_columns(self, p: Mapping[str, float], samples: Samples, X: np.ndarray):
         """Innovations of ``[y, X]`` through the model's Kalman filter: ``(E, f)``."""
-        ss = self.state_space(p, samples.dt)
         Y = np.empty((len(samples), 1 + X.shape[1]))
-        Y[:, 0] = samples.drift
         Y[:, 1:] = X
+        return self.filter_matrix(p, samples, Y)
+
+    def filter_matrix(self, p: Mapping[str, float], samples: Samples, Y: np.ndarray):
+        """:meth:`filter_columns` of ``Y[:, 1:]`` written into the filter's input ``Y``
+        (N, 1 + m) by the caller (no copy of them); its column 0 is set here."""
+        ss = self.state_space(p, samples.dt)
+        Y[:, 0] = samples.drift
         return kf_innovations(ss.phi, ss.q, ss.p0, ss.r, Y, samples.noise_weights)
 
     def innovations(self, p: Mapping[str, float], samples: Samples):

@@ -155,15 +155,16 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
             # through the filter :data:`FILTER_COLUMNS` at a time (memory), each block's
             # regressors written into the filter's input as they are made
             C = np.empty((int(ok.sum()), len(zs)))
+            every = bool(ok.all())
             for i in range(0, len(zs), FILTER_COLUMNS):
                 chunk = zs[i:i + FILTER_COLUMNS]
-                part = np.empty((ctx.t.size, len(chunk)))
+                Y = np.empty((ctx.t.size, 1 + len(chunk)))
                 for j, z in enumerate(chunk):
-                    part[:, j] = owner.regressors(
+                    Y[:, 1 + j] = owner.regressors(
                         {**p0, **{n: float(np.exp(v)) for n, v in
                                   zip(shapes, z, strict=True)}}, ctx)[lin]
-                C[:, i:i + part.shape[1]] = \
-                    model.filter_columns(p0, used, part)[0][ok, 1:]
+                E = model.filter_matrix(p0, used, Y)[0]
+                C[:, i:i + len(chunk)] = E[:, 1:] if every else E[ok, 1:]
             C *= scale[:, None]
             blocks.append(C)
         C = blocks[0] if len(blocks) == 1 else np.vstack(blocks)

@@ -22,6 +22,7 @@ observed information (numerical Hessian of ln L in the natural parameters).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import logging
 import threading
@@ -374,20 +375,32 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
     """
     evaluate = _Evaluator()
     try:
-        res = _ml_fit(samples, model, evaluate, sigma, fixed, n_local, start, std_errors,
-                      hessian_passes, grid)
-        return plain_shapes(res, model, fixed, lambda held, at: _ml_fit(
-            samples, model, evaluate, sigma, held, 1, at, std_errors, hessian_passes, grid))
+        def search(held: Mapping[str, float] | None, n: int | None,
+                   at: Mapping[str, float] | Sequence[Mapping[str, float]] | None
+                   ) -> tuple[FitResult, Finish]:
+            return _ml_fit(samples, model, evaluate, sigma, held, n, at, hessian_passes,
+                           grid)
+
+        res, finish = plain_shapes(*search(fixed, n_local, start), model, fixed,
+                                   lambda held, at: search(held, 1, at))
+        # the covariance of the fit kept only: a plain shape's refit made the other's
+        # Hessian wasted work (0.03-0.06 s a diagnose candidate)
+        return finish(res) if std_errors else res
     finally:
         evaluate.close()
+
+
+#: adds the observed-information covariance to the fit :func:`_ml_fit` found (or to that
+#: fit as :func:`~.plain.plain_shapes` kept it: warnings and info added)
+Finish = Callable[[FitResult], FitResult]
 
 
 def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float | None,
             fixed: Mapping[str, float] | None, n_local: int | None,
             start: Mapping[str, float] | Sequence[Mapping[str, float]] | None,
-            std_errors: bool,
-            hessian_passes: int, grid: bool = True) -> FitResult:
-    """:func:`ml_fit`, its likelihood evaluated by ``evaluate``."""
+            hessian_passes: int, grid: bool = True) -> tuple[FitResult, Finish]:
+    """:func:`ml_fit`'s search, its likelihood evaluated by ``evaluate``: the fit without
+    standard errors, and what adds them (:data:`Finish`)."""
     fixed = dict(fixed or {})
     if sigma is not None:
         fixed["markov.sigma"] = float(sigma)
@@ -412,24 +425,32 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
     if not np.isfinite(loglik):
         raise IdentificationError(f"{samples.source}: ml found no finite likelihood")
     free = [n for n in model.param_names if n not in fixed]
-    cov = None
-    std = dict.fromkeys(free, 0.0)
-    if std_errors and free:
-        cov, cw = observed_covariance(model, samples, p, free, gls_info, prob,
-                                       at_bound, hessian_passes, evaluate)
-        warnings += cw
-        std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
-    params = {}
-    for n in model.param_names:
-        if n in fixed:
-            params[n] = Estimate(float(fixed[n]), 0.0, model.unit(n), fixed=True)
-        else:
-            params[n] = Estimate(float(p[n]), std[n], model.unit(n))
+
+    def parameters(std: Mapping[str, float]) -> dict[str, Estimate]:
+        return {n: Estimate(float(fixed[n]), 0.0, model.unit(n), fixed=True) if n in fixed
+                else Estimate(float(p[n]), std[n], model.unit(n)) for n in model.param_names}
+
+    params = parameters(dict.fromkeys(free, 0.0))
     info.update({"evaluations": prob.nevals, "concentrated_scale": prob.concentrate,
                  "start_points": len(starts)})
-    return FitResult(
+    found = FitResult(
         method="ml", model=model, parameters=params, loglik=float(loglik), residuals=e,
         residual_var=f, warnings=tuple(dict.fromkeys(warnings)), source=samples.source,
         n_samples=len(samples), n_observed=samples.n_observed, dt=samples.dt,
-        covariance=cov, cov_names=tuple(free) if cov is not None else (), info=info,
+        covariance=None, cov_names=(), info=info,
     )
+
+    def finish(res: FitResult) -> FitResult:
+        """``res`` (``found``, or ``found`` with warnings and info added) with the standard
+        errors of ``found``'s optimum, the covariance's warnings after the search's."""
+        if not free:
+            return res
+        cov, cw = observed_covariance(model, samples, p, free, gls_info, prob, at_bound,
+                                      hessian_passes, evaluate)
+        std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
+        k = len(found.warnings)
+        return dataclasses.replace(
+            res, parameters=parameters(std), covariance=cov, cov_names=tuple(free),
+            warnings=tuple(dict.fromkeys((*res.warnings[:k], *cw, *res.warnings[k:]))))
+
+    return found, finish

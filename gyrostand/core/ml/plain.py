@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping
+from typing import TypeVar
 
 from ...errors import IdentificationError
 from ..model import Model
 from ..results import FitResult
 
+F = TypeVar("F")
 
-def plain_shapes(res: FitResult, model: Model, fixed: Mapping[str, float] | None,
-                 refit: Callable[[dict[str, float], Mapping[str, float]], FitResult]
-                 ) -> FitResult:
-    """``res``, or the fit with a shape parameter at its plain shape where that is better.
+
+def plain_shapes(res: FitResult, finish: F, model: Model, fixed: Mapping[str, float] | None,
+                 refit: Callable[[dict[str, float], Mapping[str, float]], tuple[FitResult, F]]
+                 ) -> tuple[FitResult, F]:
+    """``res``, or the fit with a shape parameter at its plain shape where that is better;
+    each with its ``finish`` (what adds its standard errors, computed for the kept fit
+    only).
 
     A shape parameter whose plain shape (its default, e.g. no lag: τ = 0) lies below its
     log-scale search range stops at the lower bound; the plain shape itself is then fitted
@@ -33,7 +38,7 @@ def plain_shapes(res: FitResult, model: Model, fixed: Mapping[str, float] | None
         if not d < v:
             continue
         try:
-            alt = refit({**held, name: d}, res.values)
+            alt, alt_finish = refit({**held, name: d}, res.values)
         except IdentificationError:
             continue
         if alt.loglik is not None and alt.loglik > res.loglik + 1e-6:
@@ -44,4 +49,5 @@ def plain_shapes(res: FitResult, model: Model, fixed: Mapping[str, float] | None
                     "at_bound": [*alt.info.get("at_bound", ()), name]}
             res = dataclasses.replace(alt, warnings=tuple(dict.fromkeys(warnings)),
                                       info=info)
-    return res
+            finish = alt_finish
+    return res, finish
