@@ -114,3 +114,24 @@ def test_a_new_noise_level_alone_is_scanned_down_to_its_bound():
     assert 2 * (fast.loglik - base.loglik) > 10.0  # the walk is there to find
     assert fast.loglik >= full.loglik - 1e-3
     assert abs(np.log(fast.values["random_walk.q"] / 2e-3)) < np.log(3)
+
+
+def test_the_covariance_is_computed_for_the_kept_fit_only(monkeypatch):
+    """A shape stopped at its search bound gets a refit at its plain shape (τ = 0); the
+    observed information (the costliest part of a refit after its search) is computed
+    once, for whichever of the two fits is kept, and its stds are the kept fit's."""
+    from gyrostand.core.ml import fit
+
+    s = _run(seed=2)  # a run whose temp_rate.tau stops at its lower bound
+    base = ml(s, Model.parse("markov,temp,bias,white"))
+    bigger = Model.parse("markov,temp,bias,white,temp_rate")
+    calls = []
+    real = fit.observed_covariance
+    monkeypatch.setattr(fit, "observed_covariance", lambda *a, **k: calls.append(a[2]) or
+                        real(*a, **k))
+    r = ml(s, bigger, start=base.values, grid=False, hessian_passes=1)
+    assert "temp_rate.tau" in r.info["plain"]  # the data's lag is none: the plain shape won
+    assert len(calls) == 1
+    assert calls[0]["temp_rate.tau"] == r.value("temp_rate.tau") == 0.0  # the kept fit's point
+    assert r.parameters["temp_rate.tau"].fixed and r.std("temp_rate.k") > 0
+    assert r.covariance is not None and "temp_rate.tau" not in r.cov_names
