@@ -330,7 +330,10 @@ def starts_from(prob, grid: list[np.ndarray], start: Mapping[str, float]
     # candidate: the same LR on 15 of 15 runs, walk or none, in 0-16 iterations instead of
     # 13-26 — from mid-range the search crawled to the bound where the walk adds nothing);
     # a new rate's σ with it (a second Markov process) keeps its mid-range start: scanned
-    # too, its refit found other optima both ways (LR 1.04 -> 0.003, 0 -> 45)
+    # too, its refit found other optima both ways (LR 1.04 -> 0.003, 0 -> 45); scanned at
+    # lower levels with two searches it reaches the higher optimum (LR 26-45 on a lag + walk,
+    # 41-57 on a lag alone), where it stands in for the lag and diagnose's advice on those
+    # runs fell 7/20 -> 0/20 (benchmarks/results/advice_sequence.txt, session 20)
     scanned = prob.rates if any(n in prob.rates for n in lacks) else [*prob.rates, *prob.stds]
     for i, n in enumerate(prob.znames):
         if n in start or n not in scanned:
