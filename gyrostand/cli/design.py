@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         json.dump(doc, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(render(res, limits, ref_label, verify, out))
+        print(render(res, limits, ref_label, verify, out, held_in_prediction(model, res)))
     return 0
 
 
@@ -189,6 +189,8 @@ def _document(res, limits, model, ref_label: str, verify, drift_unit: str = "y"
         "doubt": list(res.doubt),
         **program_document(res.program, limits),
         "predicted_std": {n: _finite(v) for n, v in res.predicted.items()},
+        # the parameters the predicted stds take as known (verify's fits estimate them)
+        "predicted_given": held_in_prediction(model, res),
         "reference": ref_label,
         "reference_std": {n: _finite(v) for n, v in res.reference_predicted.items()},
         "worst": {"designed": [name, _finite(rel)], "reference": [rname, _finite(rrel)]},
@@ -254,7 +256,29 @@ def _verify_summary(model, fits: list[dict[str, float] | None]
     return {"failed": sum(r is None for r in fits),
             "realized_std": {k: float(np.std(v, ddof=1)) if len(v) > 2 else None
                              for k, v in est.items()},
+            # the spread of the bulk (1.4826 x the median absolute deviation): beside the
+            # std it shows a heavy tail, e.g. a fit that traded temp_rate.k against its lag
+            "realized_robust_std": {k: robust_std(v) if len(v) > 2 else None
+                                    for k, v in est.items()},
             "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}, est
+
+
+def robust_std(values: Any) -> float:
+    """1.4826 x the median absolute deviation: the std of a normal sample, unmoved by a
+    few runs far out."""
+    import numpy as np
+
+    v = np.asarray(values, dtype=float)
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
+def held_in_prediction(model: Any, res: Any) -> dict[str, float]:
+    """The model's parameters the predicted stds hold at a value (a shape parameter at its
+    plain value: the Fisher information is of the others, given it), name -> value.
+    A fit of the run (and verify's) estimates them too."""
+    values = {**model.defaults, **res.params}
+    return {n: float(values[n]) for n in model.param_names
+            if n not in res.predicted and n in values}
 
 
 def fit_values(samples: Any, model: Any) -> dict[str, float] | None:
@@ -283,7 +307,8 @@ def headline(verify, rel: float, rrel: float, ref_label: str) -> str:
             f"{hi:.2f}); {predicted}")
 
 
-def render(res, limits, ref_label: str, verify, out: Path) -> str:
+def render(res, limits, ref_label: str, verify, out: Path,
+           held: dict[str, float] | None = None) -> str:
     lines = program_lines(res.goal, res, limits)
     lines += ["", f"{'parameter':<16}{'value':>12}{'std designed':>16}{'std ' + ref_label:>26}"
                   f"{'ratio':>8}"]
@@ -299,14 +324,23 @@ def render(res, limits, ref_label: str, verify, out: Path) -> str:
     lines.append(headline(verify, rel, rrel, ref_label))
     if verify is not None:
         lines += ["", f"verify: {verify['runs']} simulated runs each, fitted by ML "
-                      "(realized std / predicted)"]
+                      "(realized std / predicted; robust std of the bulk / predicted)"]
         for n in res.predicted:
             d = verify["designed"]["realized_std"].get(n)
             r = verify["reference"]["realized_std"].get(n)
+            dr = verify["designed"].get("realized_robust_std", {}).get(n)
+            rr = verify["reference"].get("realized_robust_std", {}).get(n)
             pd, pr = res.predicted[n], res.reference_predicted.get(n, math.nan)
-            lines.append(f"  {n:<16} designed {d:.4g} ({d / pd:.2f})   reference {r:.4g} "
-                         f"({r / pr:.2f})" if d is not None and r is not None
+            lines.append(f"  {n:<16} designed {d:.4g} ({d / pd:.2f}; {dr / pd:.2f})   "
+                         f"reference {r:.4g} ({r / pr:.2f}; {rr / pr:.2f})"
+                         if None not in (d, r, dr, rr)
                          else f"  {n:<16} too few successful fits")
+        if held:
+            given = ", ".join(f"{n} = {v:g}" for n, v in held.items())
+            it = "them" if len(held) > 1 else "it"
+            lines.append(f"  predicted with {given} known; verify's fits estimate {it}, as "
+                         "a fit of the run will: a realized std well above the robust one "
+                         f"is a tail of runs where a coefficient traded against {it}")
     lines += ["", f"files: {out}/program.csv (the chamber program), profile.csv, "
                   "simulate.yaml, design.json, design.png"]
     return "\n".join(lines)

@@ -111,3 +111,39 @@ def test_a_resample_without_spread_does_not_stop_the_interval():
     assert 0 < got4["interval"][0] < got4["ratio"] < got4["interval"][1] < np.inf
     assert ratio(0.0, 0.0) != ratio(0.0, 0.0)  # nan
     assert ratio(-1.0, 0.0) == -np.inf and ratio(3.0, 2.0) == 1.5
+
+
+def test_verify_names_what_the_prediction_holds_and_shows_the_bulk_spread(tmp_path, capsys):
+    """The predicted stds take a shape parameter at its plain value as known (temp_rate's
+    lag 0); verify's fits estimate it, as a fit of the run will. design says so
+    (``predicted_given``) and prints each realized spread twice: the std and the robust
+    std of the bulk, so a tail of runs that traded k against the lag shows as such."""
+    import json
+
+    from gyrostand.cli import main
+    from gyrostand.cli.design import robust_std
+
+    assert robust_std([1.0, 2.0, 3.0, 4.0, 100.0]) == pytest.approx(1.4826)
+    assert robust_std([5.0, 5.0, 5.0]) == 0.0
+    out = tmp_path / "d"
+    assert main(["design", "--model", "markov,temp,bias,temp_rate,white",
+                 "--param", "markov.beta=0.0015", "--param", "markov.sigma=0.05",
+                 "--param", "temp.gamma=-0.0002", "--param", "bias.b=0.1",
+                 "--param", "temp_rate.k=5", "--param", "white.sigma=0.01",
+                 "--hours", "2", "--evaluations", "2", "--verify", "3",
+                 "--out", str(out), "-q"]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads((out / "design.json").read_text())
+    assert doc["predicted_given"] == {"temp_rate.tau": 0.0}
+    assert "temp_rate.tau" not in doc["predicted_std"]
+    for label in ("designed", "reference"):
+        got = doc["verify"][label]
+        assert set(got["realized_robust_std"]) == set(got["realized_std"])
+        assert got["realized_robust_std"]["temp_rate.k"] > 0
+    assert "predicted with temp_rate.tau = 0 known; verify's fits estimate it" in text
+    k = next(ln for ln in text.splitlines() if ln.strip().startswith("temp_rate.k ")
+             and "designed" in ln)
+    d = doc["verify"]["designed"]
+    pred = doc["predicted_std"]["temp_rate.k"]
+    assert (f"({d['realized_std']['temp_rate.k'] / pred:.2f}; "
+            f"{d['realized_robust_std']['temp_rate.k'] / pred:.2f})") in k
