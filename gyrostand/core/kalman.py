@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .jit import listen, ready
-from .rts import joseph_covariance, rts_forward, sum_variance, writable
+from .rts import forward_work, joseph_covariance, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -67,9 +67,26 @@ def joseph_update(x, P, H, e, f, r, PH, K, B, BH):  # pragma: no cover - compile
 
 def kf_run(phi, q, p0, r, rw, Y, store):
     """Filter every column of ``Y`` (shape (N, m)) with the same gains: see
-    :func:`_kf_run`, to which this passes writable arrays (one compiled version)."""
-    return _kf_run(writable(phi), writable(q), writable(p0), float(r), writable(rw),
-                   writable(Y), bool(store))
+    :func:`_kf_run`, to which this passes writable arrays (one compiled version) and its
+    outputs and work arrays, allocated here (:func:`kf_work`)."""
+    Y = writable(Y)
+    phi = writable(phi)
+    return _kf_run(phi, writable(q), writable(p0), float(r), writable(rw), Y, bool(store),
+                   *kf_work(phi.shape[0], Y.shape[0], Y.shape[1], bool(store)))
+
+
+def kf_work(n: int, N: int, m: int, store: bool) -> tuple[np.ndarray, ...]:
+    """:func:`_kf_run`'s outputs and work arrays for ``n`` states and ``Y`` (N, m),
+    allocated here: numba compiles each ``np.zeros``/``np.empty``/``np.ones`` of a kernel
+    for its own rank, a first run's cost. ``X, P, E, f, G, e_row, PH, K, A, AH, ones,
+    P_last, Bk, T``: zeros where the kernel reads them first; ``E`` and ``f`` (N, m), (N,)
+    only when ``store``; ``Bk`` a block of rows and ``T`` its Gram product only for a wide
+    ``Y``."""
+    NE = N if store else 0
+    return (np.zeros((n, m)), np.zeros((n, n)), np.empty((NE, m)), np.empty(NE),
+            np.zeros((m, m)), np.empty(m), np.empty(n), np.empty(n), np.empty((n, n)),
+            np.empty(n), np.ones(n), np.empty((n, n)),
+            np.empty((BLOCK if m >= WIDE else 0, m)), np.empty((m, m) if m >= WIDE else (0, 0)))
 
 
 #: rows of whitened innovations gathered before one product into the Gram matrix, for
@@ -82,8 +99,10 @@ WIDE = 16
 
 
 @njit(cache=True, nogil=True)
-def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
-    """Filter every column of ``Y`` (shape (N, m)) with the same gains.
+def _kf_run(phi, q, p0, r, rw, Y, store,  # pragma: no cover - compiled
+            X, P, E, f_out, G, e_row, PH, K, A, AH, ones, P_last, Bk, T):
+    """Filter every column of ``Y`` (shape (N, m)) with the same gains; its outputs, state
+    and work arrays (``X`` ... ``Bk``) as :func:`kf_work` allocates them.
 
     ``rw`` (N,) or empty: weight of each sample's measurement noise, R_k = r·rw_k.
 
@@ -106,30 +125,18 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
     """
     n = phi.shape[0]
     N, m = Y.shape
-    X = np.zeros((n, m))
-    P = np.zeros((n, n))
     for i in range(n):
         P[i, i] = p0[i]
-    NE = N if store else 0
-    E = np.empty((NE, m))
-    f_out = np.empty(NE)
-    G = np.zeros((m, m))
-    e_row = np.empty(m)
     slogf = 0.0
     nobs = 0
-    PH = np.empty(n)
-    K = np.empty(n)
-    A = np.empty((n, n))
-    AH = np.empty(n)
-    ones = np.ones(n)  # H = [1 … 1]: the states are observed through their sum
-    P_last = np.empty((n, n))  # P_{k|k-1} of the last observed sample
-    r_last = np.nan            # ... and its R (NaN: the last sample was not observed)
+    # P_last: P_{k|k-1} of the last observed sample, r_last its R (NaN: the last sample
+    # was not observed); ones: H = [1 … 1], the states are observed through their sum
+    r_last = np.nan
     steady = False
     f = 0.0
     logf = 0.0
     weighted = rw.shape[0] == N
     wide = m >= WIDE
-    Bk = np.empty((BLOCK if wide else 0, m))
     nb = 0
     sf = 0.0
     for k in range(N):
@@ -138,7 +145,8 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
             steady = False
             r_last = np.nan
             if store:
-                E[k, :] = np.nan
+                for c in range(m):
+                    E[k, c] = np.nan
                 f_out[k] = np.nan
         else:
             rk = r * rw[k] if weighted else r
@@ -188,7 +196,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     Bk[nb, c] = e_row[c] * sf
                 nb += 1
                 if nb == BLOCK:
-                    _gram_block(G, Bk)
+                    _gram_block(G, Bk, T)
                     nb = 0
             else:
                 for a in range(m):
@@ -209,7 +217,7 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
                     P[i, j] *= phi[i] * phi[j]
                 P[i, i] += q[i]
     if nb > 0:
-        _gram_block(G, Bk[:nb])
+        _gram_block(G, Bk[:nb], T)
     for a in range(m):  # exactly symmetric, as the solves downstream expect
         for c in range(a):
             G[a, c] = G[c, a]
@@ -217,13 +225,17 @@ def _kf_run(phi, q, p0, r, rw, Y, store):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _gram_block(G, B):  # pragma: no cover - compiled
+def _gram_block(G, B, T):  # pragma: no cover - compiled
     """G += B' B (one BLAS product; the last, partial block is passed as its filled rows:
     a row count passed beside the block made numba compile this twice, once for the
     literal 0 it saw while typing, 0.18 s of a first run). A function of its own, not
     written in :func:`_kf_run`'s loop: there, the product's call made the narrow columns'
     sample loop about 12 % slower (the same numbers either way)."""
-    G += B.T @ B
+    np.dot(B.T, B, T)  # into T (m, m): no array allocated here
+    m = G.shape[0]
+    for a in range(m):
+        for c in range(m):
+            G[a, c] += T[a, c]
 
 
 NO_WEIGHTS = np.zeros(0)
@@ -245,21 +257,25 @@ def kf_filtered_states(phi, q, p0, r, rw, y):
     less).
     """
     ready("rts")  # a first run: compiled beside this process (.prewarm)
-    return rts_forward(writable(phi), writable(q), writable(p0), float(r), writable(rw),
-                       writable(y))[2]
+    phi, y = writable(phi), writable(y)
+    return rts_forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
+                       *forward_work(phi.shape[0], y.shape[0]))[2]
 
 
 def first_order_response(u, phi, a0, a1, x0):
     """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k: :func:`_first_order_response`
     on a writable ``u``."""
-    return _first_order_response(writable(u), float(phi), float(a0), float(a1), float(x0))
+    u = writable(u)
+    return _first_order_response(u, float(phi), float(a0), float(a1), float(x0),
+                                 np.empty(u.shape[0]))
 
 
 @njit(cache=True, nogil=True)
-def _first_order_response(u, phi, a0, a1, x0):  # pragma: no cover - compiled
-    """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k  (exact discretisation, FOH input)."""
+def _first_order_response(u, phi, a0, a1, x0, x):  # pragma: no cover - compiled
+    """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k  (exact discretisation, FOH input),
+    written into ``x`` (as long as ``u``; allocated by the caller, no allocation compiled
+    here) and returned."""
     N = u.shape[0]
-    x = np.empty(N)
     x[0] = x0
     for k in range(1, N):
         x[k] = phi * x[k - 1] + a0 * u[k - 1] + a1 * u[k]

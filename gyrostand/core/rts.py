@@ -94,33 +94,43 @@ def kf_smooth(phi, q, p0, r, rw, y):
     """
     ready("rts")  # a first run: compiled beside this process (.prewarm)
     phi = writable(phi)
-    xp, Pp, xf, Pf = rts_forward(phi, writable(q), writable(p0), float(r), writable(rw),
-                                  writable(y))
+    y = writable(y)
+    xp, Pp, xf, Pf = rts_forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
+                                  *forward_work(phi.shape[0], y.shape[0]))
     N = xp.shape[0]
     J = np.empty_like(Pf)
     if N > 1:
         J[:-1] = (Pf[:-1] * phi[np.newaxis, np.newaxis, :]) @ np.linalg.pinv(Pp[1:])
-    return _rts_backward(xp, Pp, xf, Pf, J)
+    return _rts_backward(xp, Pp, xf, Pf, J, *backward_work(phi.shape[0], y.shape[0]))
+
+
+def forward_work(n: int, N: int) -> tuple[np.ndarray, ...]:
+    """:func:`rts_forward`'s outputs and work arrays for ``n`` states and ``N`` samples,
+    allocated here (numba compiles each ``np.zeros``/``np.empty``/``np.ones`` of a kernel
+    for its own rank, a first run's cost): ``xp, Pp, xf, Pf, x, P, PH, K, A, AH, ones``
+    (``ones``: H = [1 … 1], the states are observed through their sum)."""
+    return (np.empty((N, n)), np.empty((N, n, n)), np.empty((N, n)), np.empty((N, n, n)),
+            np.zeros(n), np.zeros((n, n)), np.empty(n), np.empty(n), np.empty((n, n)),
+            np.empty(n), np.ones(n))
+
+
+def backward_work(n: int, N: int) -> tuple[np.ndarray, ...]:
+    """:func:`_rts_backward`'s outputs and work arrays (as :func:`forward_work`):
+    ``s, v, xs, Ps, d, D, JD``."""
+    return (np.empty(N), np.empty(N), np.empty(n), np.empty((n, n)), np.empty(n),
+            np.empty((n, n)), np.empty((n, n)))
 
 
 @njit(cache=True, nogil=True)
-def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
+def rts_forward(phi, q, p0, r, rw, y,  # pragma: no cover - compiled
+                xp, Pp, xf, Pf, x, P, PH, K, A, AH, ones):
     """The filter of :func:`kf_smooth`: ``x_{k|k-1}, P_{k|k-1}, x_{k|k}, P_{k|k}``, shapes
-    (N, n), (N, n, n), (N, n), (N, n, n); where ``y`` is NaN (or the innovation variance
-    is not positive) the filtered values are the predicted ones."""
+    (N, n), (N, n, n), (N, n), (N, n, n), written into ``xp, Pp, xf, Pf`` and returned
+    (every entry written); where ``y`` is NaN (or the innovation variance is not positive)
+    the filtered values are the predicted ones. Work arrays as :func:`forward_work`
+    allocates them."""
     n = phi.shape[0]
     N = y.shape[0]
-    xp = np.zeros((N, n))
-    Pp = np.zeros((N, n, n))
-    xf = np.zeros((N, n))
-    Pf = np.zeros((N, n, n))
-    x = np.zeros(n)
-    P = np.zeros((n, n))
-    PH = np.empty(n)
-    K = np.empty(n)
-    A = np.empty((n, n))
-    AH = np.empty(n)
-    ones = np.ones(n)  # H = [1 … 1]: the states are observed through their sum
     for i in range(n):
         P[i, i] = p0[i]
     weighted = rw.shape[0] == N
@@ -156,16 +166,11 @@ def rts_forward(phi, q, p0, r, rw, y):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _rts_backward(xp, Pp, xf, Pf, J):  # pragma: no cover - compiled
-    """The backward pass of :func:`kf_smooth` given the gains ``J_k`` (N, n, n)."""
+def _rts_backward(xp, Pp, xf, Pf, J,  # pragma: no cover - compiled
+                  s, v, xs, Ps, d, D, JD):
+    """The backward pass of :func:`kf_smooth` given the gains ``J_k`` (N, n, n); ``s``
+    and ``v`` (N,) filled and returned, work arrays as :func:`backward_work` allocates."""
     N, n = xf.shape
-    s = np.empty(N)
-    v = np.empty(N)
-    xs = np.empty(n)
-    Ps = np.empty((n, n))
-    d = np.empty(n)
-    D = np.empty((n, n))
-    JD = np.empty((n, n))
     tot_x = 0.0
     tot_p = 0.0
     for i in range(n):
