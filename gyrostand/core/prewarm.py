@@ -13,8 +13,11 @@ and loads it from the cache. A kernel already cached costs one index read and st
 process; a child that fails only means the command compiles the kernel itself.
 Measured (``benchmarks/first_run.py``): an empty-cache ``diagnose`` 11.5 → 7.7 s wall.
 
-The kernels allocate nothing themselves (their callers pass every output and work array:
-``kalman.kf_work``, ``rts.forward_work``, ``score.score_work``): numba compiled each
+The filter, ML's score and the smoother allocate nothing themselves (the LKF's pass, called
+once a bin on a stand, still allocates its few work arrays: allocating them in Python at
+each call would add a few µs to a bin that costs about 10 µs); their callers pass every
+output and work array:
+``kalman.kf_work``, ``rts.forward_work``, ``score.score_work``. numba compiled each
 ``np.zeros``/``np.empty``/``np.ones`` of a kernel for its own rank, and the filter's block
 product its own output. Compiles in a fresh process: ``kf_run`` 2.7 → 1.6 s, ``score_run``
 2.0 → 1.3 s, ``rts_forward`` 0.92 → 0.77 s; an empty-cache ``diagnose`` 5.1 → 4.0 s wall
