@@ -43,6 +43,7 @@ sys.path.insert(0, str(ROOT))
 from gyrostand.core.design.fisher import crlb  # noqa: E402
 from gyrostand.core.ml.fit import ml  # noqa: E402
 from gyrostand.core.ml.joint import joint_ml  # noqa: E402
+from gyrostand.core.validate import robust_std  # noqa: E402
 from tests.multirun.sets import BIAS_MEAN, PHYSICS, SPREAD, run_set  # noqa: E402
 
 N_RUNS = 5
@@ -52,12 +53,6 @@ TARGET_COVERAGE = 0.90
 N_MC = 50
 #: the shared noise parameters (the CRLB with them known shows what γ's std owes them)
 NUISANCE = ("markov.beta", "markov.sigma", "white.sigma")
-
-
-def robust_std(x) -> float:
-    """1.4826 × the median absolute deviation: the std a few wild fits do not dominate."""
-    x = np.asarray(x, dtype=float)
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
 def main(n_sets: int = 100, hours: float = 2.0) -> int:

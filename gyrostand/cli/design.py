@@ -164,13 +164,14 @@ def run(args: argparse.Namespace) -> int:
         verify = _verify(model, params, limits, case,
                          reference_record or (limits.grid, ref_case), args.verify, args.seed,
                          res.doubt)
-    doc = _document(res, limits, model, ref_label, verify, drift_unit)
+    held = held_in_prediction(model, res)
+    doc = _document(res, limits, model, ref_label, verify, held, drift_unit)
     (out / "design.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if args.json:
         json.dump(doc, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(render(res, limits, ref_label, verify, out, held_in_prediction(model, res)))
+        print(render(res, limits, ref_label, verify, out, held))
     return 0
 
 
@@ -178,8 +179,8 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _document(res, limits, model, ref_label: str, verify, drift_unit: str = "y"
-              ) -> dict[str, Any]:
+def _document(res, limits, model, ref_label: str, verify, held: dict[str, float],
+              drift_unit: str = "y") -> dict[str, Any]:
     from ..core.summary import unit_text
 
     name, rel = res.worst()
@@ -190,7 +191,7 @@ def _document(res, limits, model, ref_label: str, verify, drift_unit: str = "y"
         **program_document(res.program, limits),
         "predicted_std": {n: _finite(v) for n, v in res.predicted.items()},
         # the parameters the predicted stds take as known (verify's fits estimate them)
-        "predicted_given": held_in_prediction(model, res),
+        "predicted_given": held,
         "reference": ref_label,
         "reference_std": {n: _finite(v) for n, v in res.reference_predicted.items()},
         "worst": {"designed": [name, _finite(rel)], "reference": [rname, _finite(rrel)]},
@@ -248,6 +249,8 @@ def _verify_summary(model, fits: list[dict[str, float] | None]
     per successful fit)."""
     import numpy as np
 
+    from ..core.validate import robust_std
+
     est: dict[str, list[float]] = {k: [] for k in model.param_names}
     for r in fits:
         if r is not None:
@@ -261,15 +264,6 @@ def _verify_summary(model, fits: list[dict[str, float] | None]
             "realized_robust_std": {k: robust_std(v) if len(v) > 2 else None
                                     for k, v in est.items()},
             "mean": {k: float(np.mean(v)) if v else None for k, v in est.items()}}, est
-
-
-def robust_std(values: Any) -> float:
-    """1.4826 x the median absolute deviation: the std of a normal sample, unmoved by a
-    few runs far out."""
-    import numpy as np
-
-    v = np.asarray(values, dtype=float)
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
 def held_in_prediction(model: Any, res: Any) -> dict[str, float]:

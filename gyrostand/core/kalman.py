@@ -102,7 +102,7 @@ WIDE = 16
 def _kf_run(phi, q, p0, r, rw, Y, store,  # pragma: no cover - compiled
             X, P, E, f_out, G, e_row, PH, K, A, AH, ones, P_last, Bk, T):
     """Filter every column of ``Y`` (shape (N, m)) with the same gains; its outputs, state
-    and work arrays (``X`` ... ``Bk``) as :func:`kf_work` allocates them.
+    and work arrays (``X`` ... ``T``) as :func:`kf_work` allocates them.
 
     ``rw`` (N,) or empty: weight of each sample's measurement noise, R_k = r·rw_k.
 

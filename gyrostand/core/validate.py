@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from ..errors import DataError, IdentificationError
@@ -36,12 +38,19 @@ def find_spikes(y: np.ndarray, threshold: float = SPIKE_THRESHOLD) -> np.ndarray
     return obs[_spikes_dense(y[obs], threshold)]
 
 
+def robust_std(values: np.ndarray | Sequence[float]) -> float:
+    """1.4826 × the median absolute deviation: the std of a normal sample, unmoved by a
+    few values far out."""
+    v = np.asarray(values, dtype=float)
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
 def _spikes_dense(y: np.ndarray, threshold: float) -> np.ndarray:
     d = np.diff(y)
     if d.size < 10:
         return np.zeros(0, dtype=int)
     med = np.median(d)
-    scale = 1.4826 * float(np.median(np.abs(d - med)))
+    scale = robust_std(d)
     if scale == 0:
         scale = float(np.mean(np.abs(d - med)))
     if scale == 0:

@@ -121,7 +121,7 @@ def test_verify_names_what_the_prediction_holds_and_shows_the_bulk_spread(tmp_pa
     import json
 
     from gyrostand.cli import main
-    from gyrostand.cli.design import robust_std
+    from gyrostand.core.validate import robust_std
 
     assert robust_std([1.0, 2.0, 3.0, 4.0, 100.0]) == pytest.approx(1.4826)
     assert robust_std([5.0, 5.0, 5.0]) == 0.0
