@@ -17,6 +17,7 @@ from ..core.summary import fit_table, unit_text
 from . import ByKind
 from .allan_text import allan
 from .lackfit import reference
+from .segments import open_loop_by_segment
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
 
 if TYPE_CHECKING:
@@ -161,13 +162,7 @@ def model_error(err: ModelError) -> list[str]:
                          f"{f(r['floor']):>10} {f(r['unexplained']):>10} "
                          f"{f(r['fit_percent'], '.1f'):>7}")
     w = err.windows_s[0]
-    rows = err.entries[(0.0, w)]
-    if len(rows) > 1:
-        lines.append(f"  open loop per segment ({w:g}-s means, {u}): " + "; ".join(
-            f"{err.ranges[i]['kind']} {err.ranges[i]['t_start']:.0f}–"
-            f"{err.ranges[i]['t_stop']:.0f} s {f(rows[i]['rms'])}"
-            for i in range(1, len(rows)) if rows[i]["rms"] is not None))
-    return lines
+    return lines + open_loop_by_segment(err.ranges, err.entries[(0.0, w)], w, u)
 
 
 def _with_ledger(body: str, view: DiagnosisView | FitStepView) -> str:
