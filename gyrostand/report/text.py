@@ -74,11 +74,13 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
                  f"p = {d.ljung_box_p:.3g} over {d.lags} lags, normalized innovations "
                  f"{d.nis_mean:.3f} (95 % band {d.nis_band[0]:.3f}–{d.nis_band[1]:.3f})")
     lines.append("")
-    lines.append(f"per segment of the temperature profile (innovations, {u})")
+    lines.append(f"per segment of the temperature profile (innovations, {u}; t from the "
+                 "run's start)")
     lines.append(f"  {'kind':<8} {'t from':>8} {'t to':>8} {'T from':>7} {'T to':>7} "
                  f"{'mean':>10} {'RMS':>10} {'smoothed':>10}")
+    t0 = d.segments[0]["t_start"] if d.segments else 0.0  # a log's times are epoch s
     for s in d.segments:
-        lines.append(f"  {s['kind']:<8} {s['t_start']:8.0f} {s['t_stop']:8.0f} "
+        lines.append(f"  {s['kind']:<8} {s['t_start'] - t0:8.0f} {s['t_stop'] - t0:8.0f} "
                      f"{s['temp_start']:7.2f} {s['temp_stop']:7.2f} {s['mean']:10.3g} "
                      f"{s['rms']:10.3g} {s['smoothed_mean']:10.3g}")
     lines.append("")

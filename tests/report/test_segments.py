@@ -3,6 +3,7 @@ line for a short run (unchanged), a table by kind of segment for a long one."""
 
 import numpy as np
 
+from gyrostand.cli import main
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.verdict import fit_error
 from gyrostand.core.ml.fit import ml
@@ -44,7 +45,8 @@ def test_a_short_run_keeps_its_one_line_and_a_long_one_gets_a_table_by_kind():
     assert open_loop_by_segment(ranges[:1], rows[:1], 60.0, "deg/h") == []
 
 
-def test_a_long_run_with_a_hidden_rate_effect_fails_on_its_ramps_not_its_soaks(tmp_path):
+def test_a_long_run_with_a_hidden_rate_effect_fails_on_its_ramps_not_its_soaks(tmp_path,
+                                                                             capsys):
     """A 6-h chamber cycle built from frames (jitter, partial first and last bins,
     quantised sensor) with a hidden dT/dt effect, diagnosed on the base model: the table
     has one row per kind, its counts are the segments', and the ramps are where the
@@ -85,3 +87,10 @@ def test_a_long_run_with_a_hidden_rate_effect_fails_on_its_ramps_not_its_soaks(t
            if (r["unexplained"] or 0) > 0]
     assert len(out) <= 1 and not set(out) & {"heating", "cooling"}, out
     assert np.median([r["rms"] for r in rows2]) < np.median([r["rms"] for r in rows])
+    # the command's text: both per-segment tables count from the run's start
+    assert main(["-q", "diagnose", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "NOT ADEQUATE" in out and "segments by kind" in out
+    inno = out.split("per segment of the temperature profile")[1].splitlines()
+    assert inno[2].split()[:2] == ["soak", "0"]
+    assert "1700" not in out.split("candidates, best first")[0].split("model error")[1]
