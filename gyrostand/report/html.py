@@ -159,13 +159,17 @@ def parameters(rep: DiagnoseResult) -> str:
 
 
 def segments(rep: DiagnoseResult) -> str:
+    """Residuals per segment of the profile; times from the run's start (a log's are
+    epoch seconds)."""
+    segs = rep.diagnosis.segments
+    t0 = segs[0]["t_start"] if segs else 0.0
     return table(
         ["kind", "t from (s)", "t to (s)", "T from (°C)", "T to (°C)", "n",
          "mean innovation", "innovation RMS", "mean smoothed residual"],
-        [[e(g["kind"]), num(g["t_start"], ".0f"), num(g["t_stop"], ".0f"),
+        [[e(g["kind"]), num(g["t_start"] - t0, ".0f"), num(g["t_stop"] - t0, ".0f"),
           num(g["temp_start"], ".2f"), num(g["temp_stop"], ".2f"), str(g["n"]),
           num(g["mean"], ".3g"), num(g["rms"], ".3g"), num(g["smoothed_mean"], ".3g")]
-         for g in rep.diagnosis.segments])
+         for g in segs])
 
 
 def candidates(rep: DiagnoseResult) -> str:
