@@ -120,7 +120,7 @@ def _refined(q: Partial, samples: Samples, model: Model, base: FitResult, lib: l
     (the same seed)."""
     lo, hi = float(q.x.min()), float(q.x.max())
     spacing = 0.8 * (hi - lo) / (N_STEPS - 1)
-    widths = REFINE_WIDTHS
+    widths: tuple[float, ...] = REFINE_WIDTHS
     lib = list(lib)
     for _ in range(REFINE_PASSES):
         lib = _refine_pass(samples, model, base, lib, pick, steps, spacing, widths)
