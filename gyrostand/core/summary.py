@@ -12,7 +12,7 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Protocol
 
-__all__ = ["UNIT_TEXT", "DRIFT_UNIT", "unit_text", "fit_table"]
+__all__ = ["UNIT_TEXT", "DRIFT_UNIT", "unit_text", "fit_table", "shown_warnings"]
 
 UNIT_TEXT = {"y": "y", "1/s": "1/s", "y/(s*degC)": "y/(s·°C)", "y/sqrt(s)": "y/√s"}
 
@@ -110,6 +110,24 @@ def fit_table(r: Tabulated) -> str:
     lines.append(f"residual RMS   {r.residual_rms:.6g} {r.unit}")
     if not named:
         lines.append("(y = the drift's unit, e.g. deg/h)")
-    for w in r.warnings:
+    for w in shown_warnings(r.warnings):
         lines.append(f"warning: {w}")
     return "\n".join(lines)
+
+
+def shown_warnings(warnings: Sequence[str]) -> list[str]:
+    """The warnings as a user reads them: a parameter's "is at its lower search bound" is
+    left out where the same parameter "is at its plain shape" (that one names the bound
+    and why the plain shape was kept: two lines for one parameter read as a contradiction).
+    The fit's own list, and its JSON, keep both (identification reads the bound's).
+
+    >>> shown_warnings(["ml: a.tau is at its lower search bound (at the edge of its "
+    ...                 "plausible range)", "ml: a.tau is at its plain shape (0; ln L +0.59 "
+    ...                 "over its search bound 3)", "ml: b.w is at its lower search bound (x)"])
+    ['ml: a.tau is at its plain shape (0; ln L +0.59 over its search bound 3)', \
+'ml: b.w is at its lower search bound (x)']
+    """
+    plain = {w.split()[1] for w in warnings
+             if w.startswith("ml: ") and " is at its plain shape " in w}
+    return [w for w in warnings if not (w.startswith("ml: ") and w.split()[1] in plain
+                                        and " is at its lower search bound " in w)]

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 from ..core.diagnose.joint import JointDiagnosis
 from ..core.ml.joint import JointFit
 from ..core.results import FitResult
-from ..core.summary import unit_text
+from ..core.summary import shown_warnings, unit_text
 from . import ByKind
 from . import allan_text as _allan
 from . import text as _text
@@ -92,7 +92,7 @@ def figure(plot: Plot) -> str:
 
 
 def warnings(items: Sequence[str]) -> str:
-    ws = list(dict.fromkeys(items))
+    ws = shown_warnings(list(dict.fromkeys(items)))
     if not ws:
         return ""
     return "<h2>Warnings</h2><ul>" + "".join(f"<li>{e(w)}</li>" for w in ws) + "</ul>"

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 from ..core.diagnose.joint import JointDiagnosis
 from ..core.ml.joint import JointFit
 from ..core.results import FitResult
-from ..core.summary import fit_table, unit_text
+from ..core.summary import fit_table, shown_warnings, unit_text
 from . import ByKind
 from .allan_text import allan
 from .lackfit import reference
@@ -136,7 +136,7 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         lines.append(f"next: {adopt_command}")
         lines.append("      (writes this model into the run's session file; the daemon uses it "
                      "from its next run)")
-    for w in rep.fit.warnings:
+    for w in shown_warnings(rep.fit.warnings):
         lines.append(f"warning: {w}")
     return "\n".join(lines)
 
@@ -229,7 +229,7 @@ def fit_step(view: FitStepView) -> str:
     if eb is not None and ea is not None and eb.rms > 0:
         lines.append(f"model error {ea.rms / eb.rms * 100 - 100:+.1f} % "
                      f"({eb.rms:.4g} → {ea.rms:.4g} {ea.unit})")
-    for w in a.warnings:
+    for w in shown_warnings(a.warnings):
         lines.append(f"warning: {w}")
     if view.next:
         lines += ["", *view.next]

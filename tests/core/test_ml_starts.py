@@ -135,3 +135,26 @@ def test_the_covariance_is_computed_for_the_kept_fit_only(monkeypatch):
     assert calls[0]["temp_rate.tau"] == r.value("temp_rate.tau") == 0.0  # the kept fit's point
     assert r.parameters["temp_rate.tau"].fixed and r.std("temp_rate.k") > 0
     assert r.covariance is not None and "temp_rate.tau" not in r.cov_names
+
+
+def test_a_plain_shape_reads_as_one_warning_and_keeps_both_in_the_fit():
+    """Where the plain shape won, the text shows its warning alone (it names the bound and
+    why the plain shape was kept); the fit keeps the bound's too, which identification
+    reads (a shape at a bound where its shape is still physical)."""
+    from gyrostand.core.summary import fit_table, shown_warnings
+
+    s = _run(seed=2)  # a run whose temp_rate.tau stops at its lower bound
+    base = ml(s, Model.parse("markov,temp,bias,white"))
+    r = ml(s, Model.parse("markov,temp,bias,white,temp_rate"), start=base.values, grid=False,
+           hessian_passes=1)
+    bound = [w for w in r.warnings if "temp_rate.tau is at its lower search bound" in w]
+    plain = [w for w in r.warnings if "temp_rate.tau is at its plain shape" in w]
+    assert len(bound) == 1 and len(plain) == 1
+    shown = shown_warnings(r.warnings)
+    assert plain[0] in shown and bound[0] not in shown
+    assert [w for w in r.warnings if w not in bound] == shown  # nothing else dropped
+    text = fit_table(r)
+    assert "at its plain shape" in text and "at its lower search bound" not in text
+    # another parameter's bound stays
+    other = "ml: markov.beta is at its lower search bound (x)"
+    assert shown_warnings([*r.warnings, other])[-1] == other
