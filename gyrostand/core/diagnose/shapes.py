@@ -34,9 +34,11 @@ from ..validate import prepare
 #: every other point, :func:`_extrapolated`; the sizes are odd so that it nests)
 SHAPE_POINTS = 41
 SHAPE_POINTS_2D = (61, 7)
-#: regressor columns filtered together (the filter keeps their innovations, n·m a sample,
-#: and sums no Gram matrix: a slice of a 2-D grid at once)
-FILTER_COLUMNS = 96
+#: regressor columns filtered (and projected) together: the filter keeps their innovations,
+#: n·m a sample, and sums no Gram matrix. 32 of a 61-point slice at a time: on a 24-h
+#: record (86,400 samples) hysteresis's grid peaked at 302 MB of arrays with 96 (a whole
+#: slice and its projection's N × 61 temporary at once), 220 MB now, the same numbers
+FILTER_COLUMNS = 32
 
 
 def shape_params(model: Model, term: str) -> tuple[str, ...]:
@@ -169,7 +171,9 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
             blocks.append(C)
         C = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
         if K is not None:
-            C -= K @ (d[:, None] * (K.T @ C))
+            M = d[:, None] * (K.T @ C)
+            for i in range(0, C.shape[1], FILTER_COLUMNS):  # no N × len(zs) temporary
+                C[:, i:i + FILTER_COLUMNS] -= K @ M[:, i:i + FILTER_COLUMNS]
         norm = np.sqrt(np.einsum("ij,ij->j", C, C))
         live = norm > 1e-9 * max(float(norm.max(initial=0.0)), 1e-300)
         C /= np.where(live, norm, 1.0)  # in place: no temporary the size of C
@@ -257,8 +261,8 @@ def _shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str
         U = unit([(a, w) for a in ax_a])
         edge = j in (0, kb - 1)
         fine.add(U, edge)
-        if j % 2 == 0:  # the grid of every other point along both axes
-            coarse.add(U[:, ::2], edge)
+        if j % 2 == 0:  # the grid of every other point along both axes (a copy: a view
+            coarse.add(np.ascontiguousarray(U[:, ::2]), edge)  # kept the whole slice)
     return (_extrapolated(0.5 * fine.rim, 0.5 * coarse.rim),
             _extrapolated(fine.area, coarse.area))
 
