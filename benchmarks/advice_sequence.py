@@ -162,18 +162,17 @@ def main() -> None:
             for i in range(seeds):
                 s = data(kind, 500 + i, Path(tmp))
                 added, adequate, reasons, errs = sequence(s)
-                # a shape outside the vocabulary found: NOT ADEQUATE naming it, no term
-                # but the cubic's own parts; then the plugin term of the shape shown
-                # makes it ADEQUATE (the cubic's parts may stay or be named redundant)
-                found = not adequate and set(added) <= CUBIC_PARTS and any(
-                    "outside the vocabulary" in r for r in reasons)
-                if kind in CUBIC and not outside and adequate:
+                weak = kind in CUBIC and not outside  # its part beyond temp2: half the floor
+                if weak and adequate:
                     # the weak cubic below detection: ADEQUATE with at most its parts
                     ok = set(added) <= CUBIC_PARTS
-                elif outside or kind in CUBIC:
-                    # ... or found (the weak one too: its part beyond temp2 is real, and a
-                    # run that shows it above the floor goes on through the plugin step)
-                    ok = found
+                elif outside or weak:
+                    # a shape outside the vocabulary found (the weak one too, where a run
+                    # shows it above its floor): NOT ADEQUATE naming it, no term but the
+                    # cubic's own parts; then the plugin term of the shape shown makes it
+                    # ADEQUATE (the cubic's parts may stay or be named redundant)
+                    ok = not adequate and set(added) <= CUBIC_PARTS and any(
+                        "outside the vocabulary" in r for r in reasons)
                     if ok:
                         added, adequate, reasons, errs2 = plugin_step(
                             s, added, f"shape{i}x{len(added)}k{n_kind}", Path(tmp))

@@ -9,14 +9,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LINE_MAX", "open_loop_by_segment"]
+__all__ = ["LINE_MAX", "number", "open_loop_by_segment"]
 
 #: at most this many segments are listed on one line; more: a table by kind
 LINE_MAX = 6
 
 
-def _num(x: float | None) -> str:
-    return "—" if x is None else format(x, ".3g")
+def number(x: float | None, fmt: str = ".3g") -> str:
+    """A model-error figure as the text shows it (``—`` for none)."""
+    return "—" if x is None else format(x, fmt)
 
 
 def open_loop_by_segment(ranges: Sequence[Mapping[str, Any]],
@@ -37,7 +38,7 @@ def open_loop_by_segment(ranges: Sequence[Mapping[str, Any]],
     head = f"  open loop per segment ({window_s:g}-s means, {unit})"
     if len(segs) <= LINE_MAX:
         return [head + ": " + "; ".join(
-            f"{g['kind']} {span(g)} {_num(r['rms'])}"
+            f"{g['kind']} {span(g)} {number(r['rms'])}"
             for g, r in segs)]
     kinds = list(dict.fromkeys(str(g["kind"]) for g, _ in segs))
     lines = [head + f", {len(segs)} segments by kind "
@@ -48,6 +49,6 @@ def open_loop_by_segment(ranges: Sequence[Mapping[str, Any]],
         above = sum(1 for _, r in mine if (r.get("unexplained") or 0.0) > 0.0)
         g, r = max(mine, key=lambda gr: gr[1]["rms"])
         med = float(np.median([r_["rms"] for _, r_ in mine]))
-        lines.append(f"    {kind:<10} {len(mine):>8} {above:>6} {_num(med):>11}  "
-                     f"{_num(r['rms'])} at {span(g)} (floor {_num(r.get('floor'))})")
+        lines.append(f"    {kind:<10} {len(mine):>8} {above:>6} {number(med):>11}  "
+                     f"{number(r['rms'])} at {span(g)} (floor {number(r.get('floor'))})")
     return lines

@@ -17,7 +17,7 @@ from ..core.summary import fit_table, shown_warnings, unit_text
 from . import ByKind
 from .allan_text import allan
 from .lackfit import reference
-from .segments import open_loop_by_segment
+from .segments import number, open_loop_by_segment
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
 
 if TYPE_CHECKING:
@@ -145,10 +145,7 @@ def model_error(err: ModelError) -> list[str]:
     """The headline model error and its table: open loop and h-step, per window."""
     h = err.headline()
     u = err.unit
-
-    def f(x: float | None, fmt: str = ".3g") -> str:
-        return "—" if x is None else format(x, fmt)
-
+    f = number
     lines = [f"model error (open loop: measured − model driven by the temperature alone, "
              f"{h['window_s']:g}-s means over the run): RMS {f(h['rms'])} {u}, floor "
              f"{f(h['floor'])} {u} (what the model's own noise leaves), unexplained "

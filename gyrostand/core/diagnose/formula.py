@@ -121,8 +121,7 @@ def _refined(q: Partial, samples: Samples, model: Model, base: FitResult, lib: l
     lo, hi = float(q.x.min()), float(q.x.max())
     spacing = 0.8 * (hi - lo) / (N_STEPS - 1)
     widths: tuple[float, ...] = REFINE_WIDTHS
-    lib = list(lib)
-    for _ in range(REFINE_PASSES):
+    for _ in range(REFINE_PASSES):  # each pass works on its own copy of lib
         lib = _refine_pass(samples, model, base, lib, pick, steps, spacing, widths)
         spacing = 2.0 * spacing / (REFINE_POINTS - 1)
         widths = REFINE_WIDTHS[:3]
