@@ -31,6 +31,7 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.reference_fit import HIDDEN, run  # noqa: E402
 from gyrostand.core.data import Samples  # noqa: E402
+from gyrostand.core.diagnose.joint import joint_diagnose  # noqa: E402
 from gyrostand.core.diagnose.verdict import diagnose  # noqa: E402
 from gyrostand.core.model import Model  # noqa: E402
 from gyrostand.core.terms.builtin import TERMS  # noqa: E402
@@ -102,11 +104,18 @@ def data(kind: str, seed: int, tmp: Path) -> Samples:
     return Samples.from_arrays(s.t, drift, s.temp)
 
 
-def sequence(s: Samples, model: Model | None = None, added: list[str] | None = None
+def sequence(s: Samples, model: Model | None = None, added: list[str] | None = None,
+             second: Callable[[], Samples] | None = None
              ) -> tuple[list[str], bool, list[str], list[tuple[float, float, frozenset]]]:
     """Follow the advice from ``model`` (default markov,temp,bias; ``added``: the terms it
     has beyond that): (terms added, final verdict, final reasons, (rms, unexplained) of
-    the open-loop error at each diagnosis, with the terms added by then)."""
+    the open-loop error at each diagnosis, with the terms added by then).
+
+    ``second``: where the record ties the candidate proposed first with its competitor
+    (``diagnose``'s line: a second switch-on tells them apart), the user records a
+    second run (``second()``) and follows the joint advice of both runs from the model
+    reached (:func:`joint_steps`); the reasons then start with :data:`TIE_PATH`. None:
+    the one-record advice throughout."""
     model = model or Model.parse("markov,temp,bias")
     added = list(added or [])
     errors = []
@@ -121,10 +130,34 @@ def sequence(s: Samples, model: Model | None = None, added: list[str] | None = N
             continue
         if rep.adequate or not rep.significant:
             return added, rep.adequate, list(rep.reasons), errors
+        if second is not None and rep.tie:
+            added, adequate, reasons = joint_steps([s, second()], model, added)
+            return added, adequate, [f"{TIE_PATH} ({' and '.join(rep.tie)})", *reasons], errors
         term = rep.significant[0].term
         added.append(term)
         model = model.add(term)
     return added, False, ["steps exhausted"], errors
+
+
+#: the first reason of a sequence that took the tie's second run
+TIE_PATH = "a tie: second run recorded"
+
+
+def joint_steps(runs: list[Samples], model: Model, added: list[str]
+                ) -> tuple[list[str], bool, list[str]]:
+    """``gyrostand diagnose RUN SECOND_RUN`` followed from ``model`` (``added``: its terms
+    beyond markov,temp,bias): add the first significant candidate of the joint diagnosis
+    while it says NOT ADEQUATE (:func:`~gyrostand.core.diagnose.joint.joint_diagnose`)."""
+    added = list(added)
+    for _ in range(MAX_STEPS):
+        rep = joint_diagnose(runs, model)
+        alpha_each = rep.alpha / max(len(rep.candidates), 1)
+        sig = [c for c in rep.candidates if c.ranked and c.p_value < alpha_each]
+        if rep.adequate or not sig:
+            return added, rep.adequate, list(rep.reasons)
+        added.append(sig[0].term)
+        model = model.add(sig[0].term)
+    return added, False, ["steps exhausted"]
 
 
 def plugin_step(s: Samples, added: list[str], name: str, tmp: Path
@@ -151,17 +184,22 @@ def plugin_step(s: Samples, added: list[str], name: str, tmp: Path
 
 
 def main() -> None:
-    seeds = int(sys.argv[1]) if len(sys.argv) > 1 else 5
-    kinds = sys.argv[2:] or list(KINDS)
+    argv = [a for a in sys.argv[1:] if a != "--one-record"]
+    one_record = len(argv) < len(sys.argv) - 1
+    seeds = int(argv[0]) if argv else 5
+    kinds = argv[1:] or list(KINDS)
     with tempfile.TemporaryDirectory() as tmp:
         for n_kind, kind in enumerate(kinds):
             truth = set(KINDS[kind][0])
             outside = "outside" in kind
-            right, share, fall, fall_all, wrong = 0, [], [], [], []
+            right, share, fall, fall_all, wrong, ties = 0, [], [], [], [], 0
             t0 = time.perf_counter()
             for i in range(seeds):
                 s = data(kind, 500 + i, Path(tmp))
-                added, adequate, reasons, errs = sequence(s)
+                second = None if one_record else (
+                    lambda kind=kind, i=i: data(kind, 600 + i, Path(tmp)))
+                added, adequate, reasons, errs = sequence(s, second=second)
+                ties += bool(reasons) and reasons[0].startswith(TIE_PATH)
                 weak = kind in CUBIC and not outside  # its part beyond temp2: half the floor
                 if weak and adequate:
                     # the weak cubic below detection: ADEQUATE with at most its parts
@@ -184,7 +222,9 @@ def main() -> None:
                 right += ok
                 if not ok:
                     wrong.append(f"seed {500 + i}: +{','.join(added) or '-'} "
-                                 f"{'ADEQUATE' if adequate else 'NOT ADEQUATE'}")
+                                 f"{'ADEQUATE' if adequate else 'NOT ADEQUATE'}"
+                                 + (f" ({reasons[0]})" if reasons and
+                                    reasons[0].startswith(TIE_PATH) else ""))
                 if truth and errs[0][0] > 0:
                     share.append(errs[0][1] / errs[0][0])
                 if truth and added and added[0] in truth and len(errs) > 1 and errs[0][1] > 0:
@@ -192,7 +232,8 @@ def main() -> None:
                 every = [e for e in errs if truth <= e[2]]  # once every true term is in
                 if len(truth) > 1 and every and errs[0][1] > 0:
                     fall_all.append(1 - every[0][1] / errs[0][1])
-            line = f"{kind:<24} right {right}/{seeds}"
+            line = f"{kind:<24} right {right}/{seeds}" + (
+                f" ({ties} through the tie's second run)" if ties else "")
             if share:
                 line += (f"; unexplained share before {np.min(share):.0%}..{np.max(share):.0%}"
                          f" (>= 50 % in {sum(x >= SHARE_MIN for x in share)}/{len(share)})")

@@ -119,6 +119,10 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         best = rep.significant[0]
         lines.append("")
         lines.append(f"next: {fit_command} --add {best.term}")
+        if rep.tie:
+            lines.append(f"      ({' and '.join(rep.tie)} tie on this record: a second "
+                         "switch-on of this gyro tells them apart — record one with the "
+                         f"same profile, then: {second_run_command(fit_command)})")
     elif rep.outside:
         lines.append("")
         lines.append(f"next: {term_new_command(fit_command)}")
@@ -174,6 +178,15 @@ def term_new_command(fit_command: str) -> str:
     """``term new --from DATA …`` for the data of ``fit_command`` (``… fit DATA …``)."""
     head, sep, tail = fit_command.partition(" fit ")
     return f"{head} term new --from {tail}" if sep else "gyrostand term new --from RUN"
+
+
+def second_run_command(fit_command: str) -> str:
+    """``diagnose DATA SECOND_RUN``, the joint diagnosis of the data of ``fit_command``
+    and a second run still to be recorded (``SECOND_RUN``: its folder)."""
+    head, sep, tail = fit_command.partition(" fit ")
+    data = tail.split(" --")[0]
+    return (f"{head} diagnose {data} SECOND_RUN" if sep
+            else "gyrostand diagnose RUN SECOND_RUN")
 
 
 def _test(name: str) -> str:

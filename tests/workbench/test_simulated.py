@@ -137,6 +137,49 @@ def test_a_tie_says_so_and_what_tells_them_apart(monkeypatch):
     assert "a tie on this record (neither significant given the other: p 0.32, 0.5)" \
         in out[0].note
     assert "a trend keeps its rate, a random walk wanders" in out[0].note
+    assert out[0].tied and out[1].tied and out[0].to_dict()["tied"] is True
     p_walk["value"] = 0.001  # the walk significant given the trend: no tie
     out = C.order_competitors(None, WALK, cands, 0.0071)  # type: ignore[arg-type]
     assert out[0].term == "random_walk" and "tie" not in out[0].note
+    assert not out[0].tied and not out[1].tied
+
+
+def test_a_tie_s_next_step_is_a_second_run():
+    """Where the record ties the candidate proposed first with its competitor, the
+    ``next:`` line stays the pasteable fit of this record, and the line under it says a
+    second switch-on decides, with the joint diagnosis to run on both (the path
+    benchmarks/advice_sequence.py follows); without a tie no such line."""
+    import dataclasses
+
+    from gyrostand.core.diagnose.diagnostics import diagnose_fit
+    from gyrostand.core.diagnose.results import Candidate, DiagnoseResult
+    from gyrostand.core.ml.fit import ml
+    from gyrostand.core.profiles import chamber_profile
+    from gyrostand.core.simulation import simulate
+    from gyrostand.report import html, text
+
+    m = Model.parse("markov,temp,bias")
+    s = simulate(m, {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -5e-4,
+                     "white.sigma": 0.0, "bias.b": 0.3}, chamber_profile(1.0), seed=3)
+    fit = ml(s, m)
+    walk = Candidate(term="random_walk", lr_stat=25.0, df=1, p_value=1e-6, delta_aic=-23.0,
+                     delta_bic=-20.0, rms_after=0.02, loglik_after=0.0, effect={},
+                     seconds=0.0, stochastic=True, competes="trend", tied=True)
+    trend = dataclasses.replace(walk, term="trend", stochastic=False, competes="random_walk",
+                                lr_stat=24.0)
+    rep = DiagnoseResult(model=m, fit=fit, diagnosis=diagnose_fit(fit, s),
+                         candidates=(walk, trend), adequate=False, alpha=0.05,
+                         look_alikes=(), reasons=("random_walk significant",))
+    assert rep.tie == ("random_walk", "trend")
+    fit_cmd = "/v/bin/python -m gyrostand fit '/data/a run' --model markov,temp,bias"
+    lines = text.diagnosis(rep, "a run", fit_cmd).splitlines()
+    i = lines.index(f"next: {fit_cmd} --add random_walk")
+    assert lines[i + 1] == (
+        "      (random_walk and trend tie on this record: a second switch-on of this gyro "
+        "tells them apart — record one with the same profile, then: /v/bin/python -m "
+        "gyrostand diagnose '/data/a run' SECOND_RUN)")
+    assert "gyrostand diagnose &#x27;/data/a run&#x27; SECOND_RUN" in html.verdict(rep, fit_cmd)
+    untied = dataclasses.replace(rep, candidates=(dataclasses.replace(walk, tied=False),
+                                                  trend))
+    assert untied.tie is None
+    assert "SECOND_RUN" not in text.diagnosis(untied, "a run", fit_cmd)

@@ -148,9 +148,10 @@ def order_competitors(samples: Samples, model: Model, cands: list[Candidate],
     why = (f"predicts held-out blocks better (ln p {cache[first.term] - cache[other.term]:+.1f}"
            f" over {other.term})" if held else "both explain the failure" if first is d
            else "explains the failure better") + "; proposed first"
-    why += _tie(cache, d.term, st.term, alpha_each)
-    marked = {d.term: dataclasses.replace(d, competes=st.term),
-              st.term: dataclasses.replace(st, competes=d.term)}
+    tie = _tie(cache, d.term, st.term, alpha_each)
+    why += tie
+    marked = {d.term: dataclasses.replace(d, competes=st.term, tied=bool(tie)),
+              st.term: dataclasses.replace(st, competes=d.term, tied=bool(tie))}
     marked[first.term] = dataclasses.replace(marked[first.term], note=f"competes with "
                                              f"{other.term}: {why}")
     marked[other.term] = dataclasses.replace(marked[other.term], note=f"competes with "

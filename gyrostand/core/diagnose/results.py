@@ -29,7 +29,9 @@ class Candidate:
     parameter it adds has |estimate| ≥ 2 std and no flat direction involves it) and no
     time constant or rate of it sits at a search bound (``at_bound``). ``stochastic`` marks
     a random process (markov2, random_walk); ``competes`` names the candidate of the other
-    kind that explains the same failure, ``note`` says why one is not ranked, ``traded``
+    kind that explains the same failure (``tied``: and this record cannot rank the two:
+    neither is significant given the other, a second run of the gyro decides),
+    ``note`` says why one is not ranked, ``traded``
     names the random-part parameters its refit moved beyond ±3 std (the effect traded
     against the random part rather than explaining a failure of the deterministic one).
     ``score_stat``/``score_p``: its score (LM) test at the current fit (:mod:`.screen`),
@@ -64,6 +66,7 @@ class Candidate:
     score_p: float | None = None
     screened: bool = False
     stand_in: bool = False
+    tied: bool = False
 
     @property
     def ranked(self) -> bool:
@@ -84,7 +87,7 @@ class Candidate:
             "shape_lkc": list(self.shape_lkc), "n_params": self.n_params,
             "traded": list(self.traded),
             "score_stat": self.score_stat, "score_p": self.score_p,
-            "screened": self.screened, "stand_in": self.stand_in,
+            "screened": self.screened, "stand_in": self.stand_in, "tied": self.tied,
         }
 
 
@@ -113,6 +116,15 @@ class DiagnoseResult:
         """Ranked candidates significant after Bonferroni, in the order proposed."""
         m = max(len(self.candidates), 1)
         return [c for c in self.candidates if c.ranked and c.p_value < self.alpha / m]
+
+    @property
+    def tie(self) -> tuple[str, str] | None:
+        """The candidate proposed first and its competitor when this record ties them
+        (:attr:`Candidate.tied`: a second run of the gyro tells them apart), else None."""
+        sig = self.significant
+        if sig and sig[0].tied and sig[0].competes:
+            return sig[0].term, sig[0].competes
+        return None
 
     @property
     def outside(self) -> bool:
