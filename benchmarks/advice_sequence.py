@@ -13,7 +13,16 @@ Each run: a seeded 4-h chamber cycle (benchmarks/reference_fit.run: the sensor q
 0.05 °C with 0.01 °C noise), 1 % of the 1-s bins dropped at random (a frame lost) and the
 first and last bins partial (half the frames: their noise doubled). Model markov,temp,bias.
 
-Run: ``.venv/bin/python benchmarks/advice_sequence.py [SEEDS [KIND ...]]`` (default 5, all)
+Where ``diagnose`` says the record ties the candidate it proposes first with its competitor
+(a trend and a rate random walk: neither significant given the other; its line under
+``next:``: a second switch-on tells them apart), the user records that second run (the
+kind's run with seed 600+i) and follows the joint advice of both runs from the model
+reached (``gyrostand diagnose RUN SECOND_RUN``, then ``fit RUN SECOND_RUN --add``: see
+benchmarks/advice_two_runs.py); ``--one-record`` follows the one-record ``next:`` line
+there instead (the figures before session 23).
+
+Run: ``.venv/bin/python benchmarks/advice_sequence.py [--one-record] [SEEDS [KIND ...]]``
+(default 5, all)
 
 Outside the vocabulary, a cubic in T: at 6e-5 deg/h/°C³ the sequence must end NOT ADEQUATE
 naming an effect outside the vocabulary (temp2, the cubic's quadratic part, may be added on
@@ -147,10 +156,16 @@ def joint_steps(runs: list[Samples], model: Model, added: list[str]
                 ) -> tuple[list[str], bool, list[str]]:
     """``gyrostand diagnose RUN SECOND_RUN`` followed from ``model`` (``added``: its terms
     beyond markov,temp,bias): add the first significant candidate of the joint diagnosis
-    while it says NOT ADEQUATE (:func:`~gyrostand.core.diagnose.joint.joint_diagnose`)."""
+    while it says NOT ADEQUATE, remove a term it names redundant when ADEQUATE
+    (:func:`~gyrostand.core.diagnose.joint.joint_diagnose`)."""
     added = list(added)
     for _ in range(MAX_STEPS):
         rep = joint_diagnose(runs, model)
+        if rep.adequate and rep.redundant:  # fit RUN SECOND_RUN --remove the term
+            gone = rep.redundant[0]["term"]
+            added.remove(gone)
+            model = model.remove(gone)
+            continue
         alpha_each = rep.alpha / max(len(rep.candidates), 1)
         sig = [c for c in rep.candidates if c.ranked and c.p_value < alpha_each]
         if rep.adequate or not sig:

@@ -454,6 +454,10 @@ def joint_diagnosis(d: JointDiagnosis) -> str:
                      f"{c.delta_bic:9.1f}  {c.note}")
     if d.candidates:
         lines.append(f"  p from: {tests_used(d.candidates)}")
+    for x in d.redundant:
+        lines.append(f"redundant: {x['term']} no longer earns its place on the runs together "
+                     f"(LR {x['lr_stat']:.2f} on {x['df']} df{_test(x['test'])}, p = "
+                     f"{x['p_value']:.2g}): fit the runs again with --remove {x['term']}")
     return "\n".join(lines)
 
 

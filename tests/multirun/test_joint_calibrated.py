@@ -61,3 +61,20 @@ def test_a_joint_diagnosis_of_two_runs_tests_a_shared_shape_over_its_range():
     assert "p from: " in table and "sup over the shape" in table
     sup_line = table.split("df = coefficients): ")[1].split(";")[0]
     assert "temp_rate" in sup_line and "hysteresis" in sup_line and "warmup" not in sup_line
+
+
+def test_a_joint_diagnosis_names_a_term_the_runs_do_not_need():
+    """Two runs without a trend, diagnosed jointly with a trend in the model: ADEQUATE, and
+    the trend named redundant by its own test on the runs together (as one run's
+    ``diagnose`` names one), in the JSON and the text; the true model names nothing."""
+    from gyrostand.core.diagnose.joint import joint_diagnose
+
+    m, runs, _ = run_set(7, n_runs=2, hours=1.5)
+    d = joint_diagnose(runs, m.add("trend"), terms=["temp2"])
+    assert d.adequate, d.reasons
+    (x,) = d.redundant
+    assert x["term"] == "trend" and x["p_value"] >= 0.05 and x["df"] == 1, x
+    assert d.to_dict()["redundant"] == [x]
+    assert "redundant: trend no longer earns its place on the runs together" in \
+        RENDERER.render(d)
+    assert joint_diagnose(runs, m, terms=["temp2"]).redundant == ()

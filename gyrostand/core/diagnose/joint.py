@@ -11,6 +11,7 @@ from ..data import Samples
 from ..ml.joint import JointFit, joint_ml
 from ..model import Model
 from .candidates import rank_candidates
+from .verdict import redundant_terms
 
 __all__ = ["JointDiagnosis", "joint_diagnose", "WHITE_ALPHA"]
 
@@ -27,6 +28,9 @@ class JointDiagnosis:
     adequate: bool
     reasons: tuple[str, ...]
     unit: str = "y"
+    #: terms of an adequate joint model that no longer earn their place
+    #: (:func:`~.verdict.redundant_terms` on the runs together): ``fit --remove`` them
+    redundant: tuple[dict[str, Any], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -38,6 +42,7 @@ class JointDiagnosis:
             "runs": [{"source": r.source, **dict(r.info.get("residual_check", {}))}
                      for r in self.fit.runs],
             "candidates": [c.to_dict(self.unit) for c in self.candidates],
+            "redundant": [dict(x) for x in self.redundant],
         }
 
 
@@ -49,7 +54,8 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
                    terms: list[str] | None = None, unit: str = "y") -> JointDiagnosis:
     """Fit ``model`` to every run jointly, check each run's innovations, rank the missing
     effects by their joint likelihood ratio (:func:`~.candidates.rank_candidates` on the
-    runs together)."""
+    runs together); an adequate model's terms that no longer earn their place on the runs
+    together are named (``redundant``), as ``diagnose`` of one run names them."""
     fit = joint_ml(runs, model)
     cands = rank_candidates(tuple(runs), model, fit, terms,  # type: ignore[arg-type]
                             alpha=alpha)
@@ -65,5 +71,8 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} on the "
                        f"{len(runs)} runs together (Bonferroni over {len(cands)} candidates: "
                        f"p < {alpha_each:.2g})")
+    redundant = tuple(redundant_terms(tuple(runs), model, fit, alpha)  # type: ignore[arg-type]
+                      ) if not reasons else ()
     return JointDiagnosis(fit=fit, candidates=tuple(cands), alpha=alpha,
-                          adequate=not reasons, reasons=tuple(reasons), unit=unit)
+                          adequate=not reasons, reasons=tuple(reasons), unit=unit,
+                          redundant=redundant)

@@ -145,24 +145,32 @@ def verdict_reasons(diag: ResidualDiagnostics, err: ModelError, ref: Reference |
 CORE_TERMS = ("markov", "temp", "white", "bias")
 
 
-def redundant_terms(samples: Samples, model: Model, fit: FitResult, alpha: float = 0.05
-                    ) -> list[dict[str, Any]]:
+def redundant_terms(samples: Samples | tuple[Samples, ...], model: Model, fit: FitResult,
+                    alpha: float = 0.05) -> list[dict[str, Any]]:
     """The terms of an adequate model that no longer earn their place: each term beyond
     :data:`CORE_TERMS` that no other term requires is removed and the smaller model
     refitted; a term whose test against the smaller model (the one it would get as a
     candidate there, :func:`~.candidates.term_test`) has p ≥ ``alpha`` is listed (term,
     lr_stat, df, p_value, test). Forward selection alone keeps what an earlier step added
     before the real effects were in: a random walk proposed first for a warm-up with a T²
-    effect stayed after both were added (benchmarks/advice_sequence.py)."""
+    effect stayed after both were added (benchmarks/advice_sequence.py). ``samples`` a
+    tuple: several runs of the gyro, each smaller model fitted jointly (``fit`` their
+    joint fit)."""
     out = []
     needed = {r for t in model.terms for r in t.requires}
     for term in model.names:
         if term in CORE_TERMS or term in needed:
             continue
         smaller = model.remove(term)
+        start = {k: v for k, v in fit.values.items()
+                 if k.split("@", 1)[0] in smaller.param_names}  # a run's own copy: name@k
         try:
-            small = ml(samples, smaller, start={k: v for k, v in fit.values.items()
-                                                if k in smaller.param_names})
+            if isinstance(samples, tuple):
+                from ..ml.joint import joint_ml
+                small: FitResult = joint_ml(samples, smaller, start=start,  # type: ignore[assignment]
+                                            hessian_passes=1)
+            else:
+                small = ml(samples, smaller, start=start)
             df, p, test = term_test(samples, smaller, small, fit, term)
         except GyrostandError as exc:
             log.info("removal of %s not tested: %s", term, exc)
