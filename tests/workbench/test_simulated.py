@@ -183,3 +183,22 @@ def test_a_tie_s_next_step_is_a_second_run():
                                                   trend))
     assert untied.tie is None
     assert "SECOND_RUN" not in text.diagnosis(untied, "a run", fit_cmd)
+
+
+def test_following_a_tie_s_second_run_ends_with_the_trend(tmp_path):
+    """The advice benchmark's trend kind, seed 507 (benchmarks/advice_sequence.py: a 4-h
+    record with drops and partial end bins): one record ties the trend with a rate random
+    walk and its held-out blocks put the walk first (the one-record advice ended
+    +random_walk ADEQUATE); following the tie's line — a second switch-on, then the joint
+    advice — ends with the trend alone, ADEQUATE."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    try:
+        from benchmarks.advice_sequence import TIE_PATH, data, sequence
+    finally:
+        sys.path.pop(0)
+    s = data("trend", 507, tmp_path)
+    added, adequate, reasons, _ = sequence(s, second=lambda: data("trend", 607, tmp_path))
+    assert reasons and reasons[0] == f"{TIE_PATH} (random_walk and trend)", reasons
+    assert added == ["trend"] and adequate, (added, reasons)
