@@ -181,11 +181,12 @@ def term_new_command(fit_command: str) -> str:
 
 
 def second_run_command(fit_command: str) -> str:
-    """``diagnose DATA SECOND_RUN``, the joint diagnosis of the data of ``fit_command``
-    and a second run still to be recorded (``SECOND_RUN``: its folder)."""
+    """``diagnose DATA SECOND_RUN [options]``, the joint diagnosis of the data of
+    ``fit_command`` (its options kept: the model, a log's session file, the gyro) and a
+    second run still to be recorded (``SECOND_RUN``: its folder)."""
     head, sep, tail = fit_command.partition(" fit ")
     data = tail.split(" --")[0]
-    return (f"{head} diagnose {data} SECOND_RUN" if sep
+    return (f"{head} diagnose {data} SECOND_RUN{tail[len(data):]}" if sep
             else "gyrostand diagnose RUN SECOND_RUN")
 
 

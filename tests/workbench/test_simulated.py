@@ -177,8 +177,9 @@ def test_a_tie_s_next_step_is_a_second_run():
     assert lines[i + 1] == (
         "      (random_walk and trend tie on this record: a second switch-on of this gyro "
         "tells them apart — record one with the same profile, then: /v/bin/python -m "
-        "gyrostand diagnose '/data/a run' SECOND_RUN)")
-    assert "gyrostand diagnose &#x27;/data/a run&#x27; SECOND_RUN" in html.verdict(rep, fit_cmd)
+        "gyrostand diagnose '/data/a run' SECOND_RUN --model markov,temp,bias)")
+    assert ("gyrostand diagnose &#x27;/data/a run&#x27; SECOND_RUN --model markov,temp,bias"
+            in html.verdict(rep, fit_cmd))
     untied = dataclasses.replace(rep, candidates=(dataclasses.replace(walk, tied=False),
                                                   trend))
     assert untied.tie is None
