@@ -113,9 +113,7 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
     """ML fit of ``model`` from ``base`` where it shares parameters, and from ``base`` with
     ``also``'s values (the reference's random part: a fit whose random part absorbed a misfit
     is not the only start); no start grid, one local search, two where the term adds two
-    shapes (a hysteresis refit's second basin won by up to 32 in ln L); a term that adds a
-    noise level alone (a random walk) is also fitted from the start grid, the better kept;
-    runs fitted jointly."""
+    shapes (a hysteresis refit's second basin won by up to 32 in ln L); runs fitted jointly."""
     start = base.values if base is not None else None
     if isinstance(samples, tuple):
         from ..ml.joint import joint_ml
@@ -124,18 +122,8 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
     if start is None:
         return ml(samples, model, hessian_passes=1)
     shapes = sum(q.kind in POSITIVE_KINDS and n not in start for n, q in model.params)
-    r = ml(samples, model, start=[start, {**start, **also}] if also else start,
-           n_local=2 if shapes >= 2 else 1, hessian_passes=1, grid=False)
-    # a new noise level alone (a random walk): ML from its own start grid as well. From
-    # the current optimum the walk's level scanned at the current β stopped at q = 0 where
-    # the Markov process had absorbed the walk (a 4-h walk run, seed 511: LR 0; from the
-    # grid LR 6.46 at β 0.0106, q 0.0021, the truth 0.01, 0.002); on 100 clean 6-h runs
-    # the grid found no better optimum (every random_walk LR the same)
-    if not shapes and any(q.kind == "std" and n not in start for n, q in model.params):
-        g = ml(samples, model, hessian_passes=1)
-        if g.loglik is not None and r.loglik is not None and g.loglik > r.loglik + 1e-6:
-            return g
-    return r
+    return ml(samples, model, start=[start, {**start, **also}] if also else start,
+              n_local=2 if shapes >= 2 else 1, hessian_passes=1, grid=False)
 
 
 def calibrated(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:
