@@ -166,8 +166,7 @@ def joint_steps(runs: list[Samples], model: Model, added: list[str]
             added.remove(gone)
             model = model.remove(gone)
             continue
-        alpha_each = rep.alpha / max(len(rep.candidates), 1)
-        sig = [c for c in rep.candidates if c.ranked and c.p_value < alpha_each]
+        sig = rep.significant
         if rep.adequate or not sig:
             return added, rep.adequate, list(rep.reasons)
         added.append(sig[0].term)
@@ -214,7 +213,8 @@ def main() -> None:
                 second = None if one_record else (
                     lambda kind=kind, i=i: data(kind, 600 + i, Path(tmp)))
                 added, adequate, reasons, errs = sequence(s, second=second)
-                ties += bool(reasons) and reasons[0].startswith(TIE_PATH)
+                tied = bool(reasons) and reasons[0].startswith(TIE_PATH)
+                ties += tied
                 weak = kind in CUBIC and not outside  # its part beyond temp2: half the floor
                 if weak and adequate:
                     # the weak cubic below detection: ADEQUATE with at most its parts
@@ -238,8 +238,7 @@ def main() -> None:
                 if not ok:
                     wrong.append(f"seed {500 + i}: +{','.join(added) or '-'} "
                                  f"{'ADEQUATE' if adequate else 'NOT ADEQUATE'}"
-                                 + (f" ({reasons[0]})" if reasons and
-                                    reasons[0].startswith(TIE_PATH) else ""))
+                                 + (f" ({reasons[0]})" if tied else ""))
                 if truth and errs[0][0] > 0:
                     share.append(errs[0][1] / errs[0][0])
                 if truth and added and added[0] in truth and len(errs) > 1 and errs[0][1] > 0:

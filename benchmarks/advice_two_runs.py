@@ -43,8 +43,7 @@ def joint_sequence(runs) -> tuple[list[str], bool, list[str]]:
     steps: list[str] = []
     for _ in range(MAX_STEPS):
         rep = joint_diagnose(runs, model)
-        alpha_each = rep.alpha / max(len(rep.candidates), 1)
-        sig = [c for c in rep.candidates if c.ranked and c.p_value < alpha_each]
+        sig = rep.significant
         if rep.adequate or not sig:
             return added, rep.adequate, steps
         first = sig[0]

@@ -197,8 +197,9 @@ def ok_summary(cov, ats) -> tuple[str, bool]:
     if many:
         j = min(many, key=lambda i: (many[i][1], -many[i][0]))
         txt += f", with >= {MANY_OK} ok {many[j][1]:.3f} ({many[j][2]}, {many[j][0]} ok) @{j}"
-    oks = [c for a in ats for v in a.values() if v[0] for c in v[1].values()]
-    pooled = [all(v[1].values()) for a in ats for v in a.values() if v[0]]
+    at_ok = [v[1] for a in ats for v in a.values() if v[0]]  # {coefficient: covered}
+    oks = [c for cov_k in at_ok for c in cov_k.values()]
+    pooled = [all(cov_k.values()) for cov_k in at_ok]
     txt += (f"; pooled over {len(pooled)} ok run-checkpoints: every coefficient covered "
             f"{np.mean(pooled):.4f}, per coefficient {np.mean(oks):.4f}; first ok @{min(have)}")
     # where the misses come from, and which checkpoints fall short of OK_COVER beyond
@@ -213,9 +214,7 @@ def ok_summary(cov, ats) -> tuple[str, bool]:
     txt += (f"; checkpoints below {OK_COVER} beyond chance (one-sided binomial p < {BINOM_ALPHA}): "
             f"{len(short)} of {len(have)}" + (f" (@{', @'.join(map(str, short))})" if short else ""))
     # each coefficient's band, pooled over every ok run-checkpoint
-    names = next(iter(v[1] for a in ats for v in a.values() if v[0]))
-    each = {n: float(np.mean([v[1][n] for a in ats for v in a.values() if v[0]]))
-            for n in names}
+    each = {n: float(np.mean([cov_k[n] for cov_k in at_ok])) for n in at_ok[0]}
     txt += "; pooled by coefficient " + ", ".join(f"{n} {c:.4f}" for n, c in each.items())
     return txt, not short and min(each.values()) >= OK_COVER
 

@@ -123,9 +123,8 @@ def verdict(rep: DiagnoseResult, fit_command: str = FIT_RUN, adopt_command: str 
         out.append(f"<p>Next step: <code>{e(fit_command)} --add {e(best.term)}</code> "
                    f"(residual RMS {num(rep.diagnosis.rms)} → {num(best.rms_after)}).</p>")
         if rep.tie:
-            out.append(f"<p>{e(' and '.join(rep.tie))} tie on this record: a second "
-                       "switch-on of this gyro tells them apart — record one with the same "
-                       f"profile, then: <code>{e(_text.second_run_command(fit_command))}</code></p>")
+            out.append(f"<p>{e(_text.tie_advice(rep.tie))} "
+                       f"<code>{e(_text.second_run_command(fit_command))}</code></p>")
     elif rep.adequate and adopt_command:
         out.append(f"<p>Next step: <code>{e(adopt_command)}</code> (writes this model into "
                    "the run's session file; the daemon uses it from its next run).</p>")

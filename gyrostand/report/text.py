@@ -120,9 +120,7 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         lines.append("")
         lines.append(f"next: {fit_command} --add {best.term}")
         if rep.tie:
-            lines.append(f"      ({' and '.join(rep.tie)} tie on this record: a second "
-                         "switch-on of this gyro tells them apart — record one with the "
-                         f"same profile, then: {second_run_command(fit_command)})")
+            lines.append(f"      ({tie_advice(rep.tie)} {second_run_command(fit_command)})")
     elif rep.outside:
         lines.append("")
         lines.append(f"next: {term_new_command(fit_command)}")
@@ -178,6 +176,12 @@ def term_new_command(fit_command: str) -> str:
     """``term new --from DATA …`` for the data of ``fit_command`` (``… fit DATA …``)."""
     head, sep, tail = fit_command.partition(" fit ")
     return f"{head} term new --from {tail}" if sep else "gyrostand term new --from RUN"
+
+
+def tie_advice(tie: tuple[str, str]) -> str:
+    """What a tie's line says before its command (text and HTML alike)."""
+    return (f"{' and '.join(tie)} tie on this record: a second switch-on of this gyro "
+            "tells them apart — record one with the same profile, then:")
 
 
 def second_run_command(fit_command: str) -> str:

@@ -11,6 +11,7 @@ from ..data import Samples
 from ..ml.joint import JointFit, joint_ml
 from ..model import Model
 from .candidates import rank_candidates
+from .results import significant
 from .verdict import redundant_terms
 
 __all__ = ["JointDiagnosis", "joint_diagnose", "WHITE_ALPHA"]
@@ -31,6 +32,12 @@ class JointDiagnosis:
     #: terms of an adequate joint model that no longer earn their place
     #: (:func:`~.verdict.redundant_terms` on the runs together): ``fit --remove`` them
     redundant: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def significant(self) -> list[Any]:
+        """Ranked candidates significant on the runs together after Bonferroni, in the
+        order proposed (as :attr:`~.results.DiagnoseResult.significant`)."""
+        return significant(self.candidates, self.alpha)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -66,7 +73,7 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
         if chk and chk["ljung_box_p"] < WHITE_ALPHA / len(runs):
             reasons.append(f"run {r.info['run']} ({r.source}): innovations are not white "
                            f"(Ljung–Box p = {chk['ljung_box_p']:.2g} over {chk['lags']} lags)")
-    sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    sig = significant(cands, alpha)
     if sig:
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} on the "
                        f"{len(runs)} runs together (Bonferroni over {len(cands)} candidates: "

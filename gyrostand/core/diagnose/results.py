@@ -4,6 +4,7 @@ candidate's likelihood ratio is judged by (``Candidate.test``)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -91,6 +92,13 @@ class Candidate:
         }
 
 
+def significant(cands: Sequence[Candidate], alpha: float) -> list[Candidate]:
+    """The ranked candidates of ``cands`` significant at ``alpha`` after Bonferroni over
+    them all, in their order (one run's diagnosis and several runs' alike)."""
+    each = alpha / max(len(cands), 1)
+    return [c for c in cands if c.ranked and c.p_value < each]
+
+
 @dataclass(frozen=True)
 class DiagnoseResult:
     """The diagnosis of a model on a data set: fit, residuals, ranked candidates, verdict."""
@@ -114,8 +122,7 @@ class DiagnoseResult:
     @property
     def significant(self) -> list[Candidate]:
         """Ranked candidates significant after Bonferroni, in the order proposed."""
-        m = max(len(self.candidates), 1)
-        return [c for c in self.candidates if c.ranked and c.p_value < self.alpha / m]
+        return significant(self.candidates, self.alpha)
 
     @property
     def tie(self) -> tuple[str, str] | None:

@@ -29,6 +29,7 @@ from typing import Any
 from ...errors import DataError, GyrostandError
 from ..data import Samples
 from ..ml.fit import ml
+from ..ml.joint_problem import base_name
 from ..model import Model, context
 from ..results import FitResult
 from ..summary import DRIFT_UNIT
@@ -163,7 +164,7 @@ def redundant_terms(samples: Samples | tuple[Samples, ...], model: Model, fit: F
             continue
         smaller = model.remove(term)
         start = {k: v for k, v in fit.values.items()
-                 if k.split("@", 1)[0] in smaller.param_names}  # a run's own copy: name@k
+                 if base_name(k) in smaller.param_names}  # a run's own copy: name@k
         try:
             if isinstance(samples, tuple):
                 from ..ml.joint import joint_ml
