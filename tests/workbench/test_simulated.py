@@ -203,3 +203,30 @@ def test_following_a_tie_s_second_run_ends_with_the_trend(tmp_path):
     added, adequate, reasons, _ = sequence(s, second=lambda: data("trend", 607, tmp_path))
     assert reasons and reasons[0] == f"{TIE_PATH} (random_walk and trend)", reasons
     assert added == ["trend"] and adequate, (added, reasons)
+
+
+def test_a_random_walk_s_refit_finds_the_walk_the_markov_process_absorbed(tmp_path):
+    """The advice benchmark's random-walk kind, seed 511 (q 2e-3 on a 4-h record): from
+    the current fit the walk's level, scanned at the current β (0.0068: the Markov process
+    absorbed the walk), stopped at q = 0 (LR 0); the refit also from the start grid's best
+    point (one local search, no standard errors unless it wins) finds the walk near the
+    truth (β 0.01, q 0.002) with LR 6.46, significant at diagnose's 0.05/8 (p 0.0055 <
+    0.00625)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    try:
+        from benchmarks.advice_sequence import data
+    finally:
+        sys.path.pop(0)
+    from gyrostand.core.diagnose.candidates import refit
+
+    s = data("random_walk", 511, tmp_path)
+    m = Model.parse("markov,temp,bias")
+    base = ml(s, m)
+    r = refit(s, m.add("random_walk"), base)
+    assert r.loglik is not None and base.loglik is not None
+    lr = 2 * (r.loglik - base.loglik)
+    assert 6.0 < lr < 7.0, lr
+    assert abs(r.values["random_walk.q"] - 0.002) < 0.001, r.values
+    assert abs(r.values["markov.beta"] - 0.01) < 0.003, r.values
