@@ -158,3 +158,29 @@ def test_a_plain_shape_reads_as_one_warning_and_keeps_both_in_the_fit():
     # another parameter's bound stays
     other = "ml: markov.beta is at its lower search bound (x)"
     assert shown_warnings([*r.warnings, other])[-1] == other
+
+
+def test_a_noise_level_at_zero_takes_the_others_covariance_from_the_smaller_fit():
+    """A candidate that adds a noise level the data do not want (a random walk on a run
+    without one: its level at 0, the fit the smaller one): with ``known`` the Hessian is
+    the added level's own curvature only — its std the number the whole Hessian gives,
+    bit for bit — and the others' covariance is the smaller fit's. A level the data want
+    (a walk there) gets the whole Hessian either way."""
+    small = Model.parse("markov,temp,bias,white")
+    bigger = small.add("random_walk")
+    s = simulate(small, TRUTH, chamber_profile(2.0), seed=11)
+    base = ml(s, small)
+    full = ml(s, bigger, start=base.values, hessian_passes=1, grid=False)
+    fast = ml(s, bigger, start=base.values, hessian_passes=1, grid=False, known=base)
+    assert full.loglik == fast.loglik and full.values == fast.values
+    assert 2 * (full.loglik - base.loglik) < 1e-3  # the level at its bound
+    q = "random_walk.q"
+    assert fast.std(q) == full.std(q) > 0
+    for n in base.cov_names:
+        assert fast.std(n) == base.std(n)
+    walk = simulate(bigger, {**TRUTH, "random_walk.q": 3e-3}, chamber_profile(2.0), seed=12)
+    base = ml(walk, small)
+    full = ml(walk, bigger, start=base.values, hessian_passes=1, grid=False)
+    fast = ml(walk, bigger, start=base.values, hessian_passes=1, grid=False, known=base)
+    assert full.values[q] > 1e-4  # the walk found: an interior optimum
+    assert np.array_equal(full.covariance, fast.covariance)

@@ -113,7 +113,9 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
     """ML fit of ``model`` from ``base`` where it shares parameters, and from ``base`` with
     ``also``'s values (the reference's random part: a fit whose random part absorbed a misfit
     is not the only start); no start grid, one local search, two where the term adds two
-    shapes (a hysteresis refit's second basin won by up to 32 in ln L); runs fitted jointly."""
+    shapes (a hysteresis refit's second basin won by up to 32 in ln L); runs fitted jointly.
+    Where the noise levels the term adds end at 0 (the fit is ``base``'s), the Hessian is
+    their own curvatures, the others' covariance ``base``'s (``ml``'s ``known``)."""
     start = base.values if base is not None else None
     if isinstance(samples, tuple):
         from ..ml.joint import joint_ml
@@ -123,7 +125,7 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
         return ml(samples, model, hessian_passes=1)
     shapes = sum(q.kind in POSITIVE_KINDS and n not in start for n, q in model.params)
     r = ml(samples, model, start=[start, {**start, **also}] if also else start,
-           n_local=2 if shapes >= 2 else 1, hessian_passes=1, grid=False)
+           n_local=2 if shapes >= 2 else 1, hessian_passes=1, grid=False, known=base)
     if not shapes and any(q.kind == "std" and n not in start for n, q in model.params):
         # a noise level alone (a random walk): from the start grid's best point as well,
         # one local search without standard errors; where it ends higher, its optimum

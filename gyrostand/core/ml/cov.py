@@ -79,12 +79,19 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
 def observed_covariance(model: Model, samples: Samples, p: dict[str, float], free: list[str],
                          gls_info: np.ndarray, prob: Problem | JointProblem,
                          at_bound: list[str],
-                         passes: int = 2, evaluate=None):
+                         passes: int = 2, evaluate=None,
+                         known: tuple[list[str], np.ndarray] | None = None):
     """Covariance from the numerical Hessian of ln L in the natural parameters (2 passes).
 
     A parameter at a search bound (typically a noise level ≈ 0) is not at an interior
     maximum: the others' covariance is then taken with it held at its estimate, and its
     own std is the inverse curvature along it alone. ``evaluate`` as :func:`hessian`.
+
+    ``known``: (names, covariance) of a smaller model's fit (a diagnosis's current fit,
+    whose candidate this is). Where every parameter the model adds to it is at a bound
+    (a random walk's level at 0: the fit is the smaller one), one pass gives the others'
+    covariance with those held, the smaller fit's own, so only the added parameters'
+    curvatures are computed — the numbers the whole Hessian's diagonal gives them.
     """
     x0 = np.array([p[n] for n in free])
     noise_scale = max(p[n] for n in model.names_of_kind("std"))
@@ -121,6 +128,11 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
+    if known is not None and passes <= 1:
+        added = [i for i, n in enumerate(free) if n not in known[0]]
+        if added and all(free[i] in at_bound for i in added) and \
+                all(n in known[0] for i, n in enumerate(free) if i not in added):
+            return _added_only(free, known, added, ll, x0, h, noise_scale, evaluate), []
     B: np.ndarray | None = None  # principal axes of a previous pass (x = x0 + B u)
     hu = h
     prev: np.ndarray | None = None  # the last covariance without a clipped direction
@@ -165,6 +177,32 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         if not warnings:
             prev = cov
     return cov, warnings
+
+
+def _added_only(free: list[str], known: tuple[list[str], np.ndarray], added: list[int],
+                ll, x0: np.ndarray, h: np.ndarray, noise_scale: float,
+                evaluate=None) -> np.ndarray:
+    """:func:`observed_covariance` where the fit is the smaller one of ``known``: its
+    covariance for the shared parameters, each added one's inverse curvature along it alone
+    (the central difference :func:`hessian` takes on the diagonal, with the same steps)."""
+    names, kcov = known
+    old = [i for i in range(len(free)) if i not in added]
+    k = [names.index(free[i]) for i in old]
+    cov = np.zeros((len(free), len(free)))
+    cov[np.ix_(old, old)] = kcov[np.ix_(k, k)]
+    pts = [x0]
+    for i in added:
+        e = np.zeros(x0.size)
+        e[i] = h[i]
+        pts += [x0 + e, x0 - e]
+    vals = evaluate(ll, pts) if evaluate is not None else [ll(q) for q in pts]
+    f0 = vals[0]
+    for j, i in enumerate(added):
+        fp, fm = vals[1 + 2 * j], vals[2 + 2 * j]
+        hii = float(np.nan_to_num((fp - 2 * f0 + fm) / h[i] ** 2, nan=0.0, posinf=0.0,
+                                  neginf=0.0))
+        cov[i, i] = 1.0 / max(-hii, 1e-300) if -hii > 0 else (0.1 * noise_scale) ** 2
+    return cov
 
 
 def _axes(cov: np.ndarray, inner: list[int], h: np.ndarray, x0: np.ndarray,

@@ -360,7 +360,8 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
        fixed: Mapping[str, float] | None = None, n_local: int | None = None,
        start: Mapping[str, float] | Sequence[Mapping[str, float]] | None = None,
        std_errors: bool = True,
-       hessian_passes: int = 2, grid: bool = True) -> FitResult:
+       hessian_passes: int = 2, grid: bool = True,
+       known: FitResult | None = None) -> FitResult:
     """Exact maximum-likelihood fit of every free parameter of ``model``.
 
     Args:
@@ -375,6 +376,9 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
         grid: start from the start grid too (:func:`start_grid`); ``False``: only from
             ``start`` and the scans of the parameters it lacks (:func:`starts_from`), for a
             refit from a neighbouring model's optimum (diagnose's candidates).
+        known: the fit of a smaller model (a candidate's current fit): where the
+            parameters ``model`` adds sit at a bound, one Hessian pass takes the others'
+            covariance from it (:func:`~.cov.observed_covariance`).
     """
     evaluate = _Evaluator()
     try:
@@ -382,7 +386,7 @@ def ml_fit(samples: Samples, model: Model, *, sigma: float | None = None,
                    at: Mapping[str, float] | Sequence[Mapping[str, float]] | None
                    ) -> tuple[FitResult, Finish]:
             return _ml_fit(samples, model, evaluate, sigma, held, n, at, hessian_passes,
-                           grid)
+                           grid, known)
 
         res, finish = plain_shapes(*search(fixed, n_local, start), model, fixed,
                                    lambda held, at: search(held, 1, at))
@@ -401,7 +405,8 @@ Finish = Callable[[FitResult], FitResult]
 def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float | None,
             fixed: Mapping[str, float] | None, n_local: int | None,
             start: Mapping[str, float] | Sequence[Mapping[str, float]] | None,
-            hessian_passes: int, grid: bool = True) -> tuple[FitResult, Finish]:
+            hessian_passes: int, grid: bool = True,
+            known: FitResult | None = None) -> tuple[FitResult, Finish]:
     """:func:`ml_fit`'s search, its likelihood evaluated by ``evaluate``: the fit without
     standard errors, and what adds them (:data:`Finish`)."""
     fixed = dict(fixed or {})
@@ -448,8 +453,10 @@ def _ml_fit(samples: Samples, model: Model, evaluate: _Evaluator, sigma: float |
         errors of ``found``'s optimum, the covariance's warnings after the search's."""
         if not free:
             return res
-        cov, cw = observed_covariance(model, samples, p, free, gls_info, prob, at_bound,
-                                      hessian_passes, evaluate)
+        cov, cw = observed_covariance(
+            model, samples, p, free, gls_info, prob, at_bound, hessian_passes, evaluate,
+            (list(known.cov_names), known.covariance)
+            if known is not None and known.covariance is not None else None)
         std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(free)}
         k = len(found.warnings)
         return dataclasses.replace(
