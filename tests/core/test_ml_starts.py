@@ -178,6 +178,11 @@ def test_a_noise_level_at_zero_takes_the_others_covariance_from_the_smaller_fit(
     assert fast.std(q) == full.std(q) > 0
     for n in base.cov_names:
         assert fast.std(n) == base.std(n)
+    # a deterministic term is a model of its own, whatever its fit: the whole Hessian
+    trend = small.add("trend")
+    full = ml(s, trend, start=base.values, hessian_passes=1, grid=False)
+    fast = ml(s, trend, start=base.values, hessian_passes=1, grid=False, known=base)
+    assert np.array_equal(full.covariance, fast.covariance)
     walk = simulate(bigger, {**TRUTH, "random_walk.q": 3e-3}, chamber_profile(2.0), seed=12)
     base = ml(walk, small)
     full = ml(walk, bigger, start=base.values, hessian_passes=1, grid=False)

@@ -88,10 +88,11 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
     own std is the inverse curvature along it alone. ``evaluate`` as :func:`hessian`.
 
     ``known``: (names, covariance) of a smaller model's fit (a diagnosis's current fit,
-    whose candidate this is). Where every parameter the model adds to it is at a bound
-    (a random walk's level at 0: the fit is the smaller one), one pass gives the others'
-    covariance with those held, the smaller fit's own, so only the added parameters'
-    curvatures are computed — the numbers the whole Hessian's diagonal gives them.
+    whose candidate this is). Where the parameters the model adds are a random process's
+    at a bound, its level at 0 (the fit is the smaller one: :func:`_added_at_zero`), one
+    pass gives the others' covariance with those held, the smaller fit's own, so only the
+    added parameters' curvatures are computed — the numbers the whole Hessian's diagonal
+    gives them.
     """
     x0 = np.array([p[n] for n in free])
     noise_scale = max(p[n] for n in model.names_of_kind("std"))
@@ -128,11 +129,10 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
-    if known is not None and passes <= 1:
-        added = [i for i, n in enumerate(free) if n not in known[0]]
-        if added and all(free[i] in at_bound for i in added) and \
-                all(n in known[0] for i, n in enumerate(free) if i not in added):
-            return _added_only(free, known, added, ll, x0, h, noise_scale, evaluate), []
+    added = _added_at_zero(model, free, known[0], at_bound, ll, ll0, x0) \
+        if known is not None and passes <= 1 else None
+    if known is not None and added:
+        return _added_only(free, known, added, ll, x0, h, noise_scale, evaluate), []
     B: np.ndarray | None = None  # principal axes of a previous pass (x = x0 + B u)
     hu = h
     prev: np.ndarray | None = None  # the last covariance without a clipped direction
@@ -177,6 +177,34 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         if not warnings:
             prev = cov
     return cov, warnings
+
+
+def _added_at_zero(model: Model, free: list[str], names: list[str], at_bound: list[str],
+                   ll, ll0: float, x0: np.ndarray) -> list[int] | None:
+    """The positions in ``free`` of the parameters ``model`` adds to the smaller fit's
+    ``names`` where the fit is that smaller one: each added term a random process whose
+    noise levels are 0 (setting them to 0 costs no ln L) and every added parameter at a
+    bound (a second process's rate with its level); None otherwise (a lag at the end of
+    its range is a model of its own)."""
+    added = [i for i, n in enumerate(free) if n not in names]
+    if not added or any(n not in names for i, n in enumerate(free) if i not in added) \
+            or any(free[i] not in at_bound for i in added):
+        return None
+    for i in added:
+        term = model.term_of(free[i])
+        if term.n_states == 0:
+            return None
+        for q in term.params:
+            if q.kind != "std":
+                continue
+            key = term.key(q.name)
+            if key not in free or free.index(key) not in added:
+                return None
+            x = x0.copy()
+            x[free.index(key)] = 0.0
+            if not ll0 - ll(x) < 1e-3:
+                return None
+    return added
 
 
 def _added_only(free: list[str], known: tuple[list[str], np.ndarray], added: list[int],
