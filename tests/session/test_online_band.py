@@ -181,3 +181,35 @@ def test_the_bias_band_widens_to_its_profile_interval():
     assert v == v0 and abs(v0 - CH_TRUTH["bias.b"]) > 3 * sd0
     assert sd / sd0 == pytest.approx(1.56, abs=0.05)
     assert abs(v - CH_TRUTH["bias.b"]) <= 3 * sd and e.status == "ok", e.note
+
+
+def test_an_estimate_off_its_own_likelihood_maximum_is_not_ok():
+    """benchmarks/lkf_accuracy.py's 6-h chamber run, seed 171, at 4200 s (the checkpoint
+    where 2 of 300 runs were ok and both missed β): the filter sits at β̂ ≈ 0.51 1/s while
+    ML on the same 4200 s finds 0.0063 ± 0.0031 (the truth 0.0017); β's profile from the
+    filter's own record is highest near 0.40, 6 of its stds below β̂, where D(β̂) ≈ 38: the
+    point is not the record's maximum, and the status says so instead of ok."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        from lkf_accuracy import CHAMBER_MODEL, CHAMBER_PROFILE, CHAMBER_TRUTH
+    finally:
+        sys.path.pop(0)
+    from gyrostand.core.data import Samples
+    from gyrostand.core.lkf.band import OFF_MAXIMUM
+    from gyrostand.core.lkf.profile import profile_check
+
+    s = simulate(CHAMBER_MODEL, CHAMBER_TRUTH, CHAMBER_PROFILE, seed=171)
+    tr = LkfTrack(CHAMBER_MODEL, LkfConfig(), s.dt)
+    for y, T in zip(s.drift[:4200].tolist(), s.temp[:4200].tolist(), strict=True):
+        tr.update(y, T)
+    e = tr.estimate()
+    b, sb = e.values["markov.beta"]
+    assert abs(b - CHAMBER_TRUTH["markov.beta"]) > 6 * sb  # the band misses, far
+    r = ml(Samples.from_arrays(s.t[:4200], s.drift[:4200], s.temp[:4200], dt=s.dt), CHAMBER_MODEL)
+    assert abs(r.value("markov.beta") - CHAMBER_TRUTH["markov.beta"]) < 3 * r.std("markov.beta")
+    *_, d_hat = profile_check(tr.filter)
+    assert d_hat > OFF_MAXIMUM
+    assert e.status != "ok" and "not its likelihood's maximum" in e.note, e.note

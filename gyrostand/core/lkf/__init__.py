@@ -20,6 +20,7 @@ EXPORTS: dict[str, str] = {
     "band_warnings": "band",
     "calibrated_estimates": "band",
     "profile_interval": "profile",
+    "profile_check": "profile",
 }
 __all__ = sorted(EXPORTS)
 __getattr__, __dir__ = exports(__name__, EXPORTS, globals())
