@@ -94,9 +94,15 @@ def test_status_is_never_ok_with_beta_at_or_below_zero_or_a_band_holding_zero():
     full = _track(s.drift, s.temp, **given)
     full.finish()
     e = full.estimate()
-    assert e.status == "ok", e.note
     b, sb = e.values["markov.beta"]
     assert b - 3 * sb > 0
+    # with the noise levels held at the truth the filter ends at β̂ 0.064 (its own band
+    # ± 0.010, 3.0 of them from the truth 0.0333) while the record's likelihood given
+    # those levels is highest near 0.034, D(β̂) 24.7: the point is off its maximum and the
+    # status says so (session 24); the reported band, widened to the profile interval
+    # (± 0.014), still holds the truth
+    assert abs(b - 0.0333) < 3 * sb
+    assert e.status == "warning" and "not its likelihood's maximum" in e.note, e.note
     # a model that is wrong for the data (a 10x too small σ held): the innovations say so
     wrong = _track(s.drift, s.temp, **{**given, "sigma": 0.01, "white_sigma": 0.005})
     w = wrong.estimate()
