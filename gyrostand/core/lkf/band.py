@@ -70,14 +70,15 @@ OFF_MAXIMUM = 9.0
 
 
 #: per filter: (its re-linearisation count, each parameter's profile half-width in its
-#: std then (≥ 1: wider than the band), whether β's likelihood stays open)
+#: std then (≥ 1: wider than the band), whether β's likelihood stays open, D(β̂))
 _PROFILES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _profile(f: RelinLKF) -> tuple[np.ndarray, bool]:
-    """β's profile of ``f`` (:func:`~gyrostand.core.lkf.profile.profile_interval`) as the
-    ratio of each parameter's half-width to its ±3σ band, and whether it is open; computed
-    once per re-linearisation (the stored record's passes) and reused until the next."""
+def _profile(f: RelinLKF) -> tuple[np.ndarray, bool, float]:
+    """β's profile of ``f`` (:func:`~gyrostand.core.lkf.profile.profile_check`) as the
+    ratio of each parameter's half-width to its ±3σ band, whether it is open, and D(β̂);
+    computed once per re-linearisation (the stored record's passes) and reused until the
+    next."""
     got = _PROFILES.get(f)
     if got is None or got[0] != f.relinearizations:
         est = f.estimates
@@ -89,15 +90,7 @@ def _profile(f: RelinLKF) -> tuple[np.ndarray, bool]:
         ratio = np.where(np.isfinite(ratio), ratio, 1.0)
         got = (f.relinearizations, ratio, open_, d_hat)
         _PROFILES[f] = got
-    return got[1], got[2]
-
-
-def _off_maximum(f: RelinLKF) -> float:
-    """D(β̂) of ``f``'s last profile (:func:`~.profile.profile_check`; 0 before any)."""
-    if f.n == 0:
-        return 0.0
-    _profile(f)
-    return float(_PROFILES[f][3])
+    return got[1], got[2], got[3]
 
 
 def calibrated_estimates(f: RelinLKF) -> dict[str, tuple[float, float]]:
@@ -107,7 +100,7 @@ def calibrated_estimates(f: RelinLKF) -> dict[str, tuple[float, float]]:
     est = f.estimates
     if f.n == 0:
         return est
-    ratio, _ = _profile(f)
+    ratio, _, _ = _profile(f)
     return {n: (v, s * max(1.0, float(r))) for (n, (v, s)), r in
             zip(est.items(), ratio, strict=True)}
 
@@ -135,14 +128,16 @@ def band_warnings(f: RelinLKF) -> list[str]:
             out.append(f"{f.params[i]} moved {move[i]:.1f} std from its linearisation "
                        f"point (bin {f.last.bins}): the bands are the next "
                        "re-linearisation's")
-    if f.n and _profile(f)[1]:
-        out.append(f"markov.beta's likelihood does not drop by 9 within ±{max(GRID):g}σ "
-                   "of its estimate: flat or strongly skewed, no band is calibrated")
-    off_max = _off_maximum(f)
-    if off_max > OFF_MAXIMUM:
-        out.append(f"markov.beta's estimate is not its likelihood's maximum (deviance "
-                   f"{off_max:.1f} from the highest point of its profile): the point is "
-                   "off, no band is calibrated")
+    if f.n:
+        _, open_, off_max = _profile(f)
+        if open_:
+            out.append(f"markov.beta's likelihood does not drop by 9 within "
+                       f"±{max(GRID):g}σ of its estimate: flat or strongly skewed, no band "
+                       "is calibrated")
+        if off_max > OFF_MAXIMUM:
+            out.append(f"markov.beta's estimate is not its likelihood's maximum (deviance "
+                       f"{off_max:.1f} from the highest point of its profile): the point "
+                       "is off, no band is calibrated")
     off = f.offset_key
     if off is not None:
         b, sb = float(v[0]), float(sd[0])

@@ -129,10 +129,10 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
             x[i] = 0.0
             if ll0 - ll(x) < 1e-3:
                 at_bound.append(n)
-    added = _added_at_zero(model, free, known[0], at_bound, ll, ll0, x0) \
-        if known is not None and passes <= 1 else None
-    if known is not None and added:
-        return _added_only(free, known, added, ll, x0, h, noise_scale, evaluate), []
+    if known is not None and passes <= 1:
+        added = _added_at_zero(model, free, known[0], at_bound, ll, ll0, x0)
+        if added:
+            return _added_only(free, known, added, ll, x0, h, noise_scale, evaluate), []
     B: np.ndarray | None = None  # principal axes of a previous pass (x = x0 + B u)
     hu = h
     prev: np.ndarray | None = None  # the last covariance without a clipped direction
@@ -158,7 +158,7 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         cov[np.ix_(inner, inner)] = sub
         for i, n in enumerate(free):
             if n in at_bound:
-                cov[i, i] = 1.0 / max(-H[i, i], 1e-300) if -H[i, i] > 0 else (0.1 * noise_scale) ** 2
+                cov[i, i] = _alone_variance(H[i, i], noise_scale)
         sd = np.sqrt(np.diag(cov))
         new_h = 0.1 * sd
         for i, n in enumerate(free):
@@ -177,6 +177,12 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
         if not warnings:
             prev = cov
     return cov, warnings
+
+
+def _alone_variance(hii: float, noise_scale: float) -> float:
+    """The variance of a parameter at a bound from the curvature ``hii`` of ln L along it
+    alone (a tenth of the noise scale, squared, where ln L does not curve down)."""
+    return 1.0 / max(-hii, 1e-300) if -hii > 0 else (0.1 * noise_scale) ** 2
 
 
 def _added_at_zero(model: Model, free: list[str], names: list[str], at_bound: list[str],
@@ -229,7 +235,7 @@ def _added_only(free: list[str], known: tuple[list[str], np.ndarray], added: lis
         fp, fm = vals[1 + 2 * j], vals[2 + 2 * j]
         hii = float(np.nan_to_num((fp - 2 * f0 + fm) / h[i] ** 2, nan=0.0, posinf=0.0,
                                   neginf=0.0))
-        cov[i, i] = 1.0 / max(-hii, 1e-300) if -hii > 0 else (0.1 * noise_scale) ** 2
+        cov[i, i] = _alone_variance(hii, noise_scale)
     return cov
 
 
