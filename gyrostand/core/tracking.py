@@ -235,8 +235,10 @@ class LkfTrack:
             relins = f.relinearizations
             f.update(y, T)
             if f.n == n0:
-                return
-            if f.relinearizations != relins:  # the history was re-filtered: new innovations
+                return  # the bin waits for its centred rate (a rate term's lag)
+            if f.relinearizations != relins or f.n > n0 + 1:
+                # the history was re-filtered, or the first window of a rate term's bins
+                # went through at once: the innovations anew
                 self._refresh_nis()
                 return
             e, v = f.last_innovation
@@ -254,6 +256,8 @@ class LkfTrack:
         """At stop: a last re-linearisation over the whole record (relin variant), so the
         online estimate at stop is the filter's fixed point on every bin."""
         f = self.filter
+        if isinstance(f, RelinLKF):
+            f.flush()  # the bins still waiting for their centred rate
         if isinstance(f, RelinLKF) and f.n > 0:
             f.relinearize()
             self._refresh_nis()
@@ -381,7 +385,7 @@ class LkfTrack:
         info = {"online": True, "status": e.status, "note": e.note,
                 "point_from": self.point.source if self.point else ""}
         if isinstance(f, RelinLKF):
-            first = max(len(samples) - f.n, 0)
+            first = max(len(samples) - f.n - f.pending, 0)
             return relin_fit(f, samples, warnings, info, first,
                              stds={n: v[1] for n, v in calibrated_estimates(f).items()})
         est = f.estimates

@@ -131,14 +131,7 @@ class Context:
         is exact on ramps and averages the steps out (noise std ≈ q/√12 · √(12/W³)).
         """
         if "rate" not in self._cache:
-            n = self.temp.size
-            w = int(round(RATE_WINDOW_S / self.dt)) | 1
-            w = min(w, n if n % 2 else n - 1)
-            if w < 5:
-                rate = np.gradient(self.temp, self.dt) if n > 1 else np.zeros(n)
-            else:
-                rate = savgol_slope(self.temp, w, self.dt)
-            self._cache["rate"] = rate
+            self._cache["rate"] = temperature_rate(self.temp, self.dt)
         return self._cache["rate"]
 
     def lagged_rate(self, tau: float) -> np.ndarray:
@@ -254,7 +247,10 @@ class Term:
     ``constant`` (its regressor is identically 1: the converging LKF enters it as an input
     of the drift, see :mod:`gyrostand.core.lkf.relin`), ``per_run`` (its parameters
     belong to one switch-on, not to the gyro: a joint fit of several runs,
-    :mod:`gyrostand.core.ml.joint`, gives each run its own).
+    :mod:`gyrostand.core.ml.joint`, gives each run its own), ``rate_input`` (its regressor
+    is a function of the temperature rate dT/dt: the converging online LKF then takes
+    each bin's rate centred, as ML does, and runs half the rate window behind the newest
+    bin, see :mod:`gyrostand.core.lkf.relin`).
     """
 
     name: ClassVar[str]
@@ -270,6 +266,7 @@ class Term:
     signature_needs: ClassVar[tuple[str, ...]] = ()
     constant: ClassVar[bool] = False
     per_run: ClassVar[bool] = False
+    rate_input: ClassVar[bool] = False
 
     def key(self, short: str) -> str:
         return f"{self.name}.{short}"
@@ -435,6 +432,31 @@ class Term:
         return hash(self.name)
 
 
+
+
+def rate_window(dt: float) -> int:
+    """Samples of the temperature-rate window at step ``dt`` (odd): ``RATE_WINDOW_S``."""
+    return int(round(RATE_WINDOW_S / dt)) | 1
+
+
+def temperature_rate(temp: np.ndarray, dt: float) -> np.ndarray:
+    """dT/dt of a temperature series (:attr:`Context.temp_rate`): the Savitzky-Golay
+    derivative over :func:`rate_window` samples (fewer on a shorter series; a plain
+    difference below 5)."""
+    n = temp.size
+    w = min(rate_window(dt), n if n % 2 else n - 1)
+    if w < 5:
+        return np.gradient(temp, dt) if n > 1 else np.zeros(n)
+    return savgol_slope(temp, w, dt)
+
+
+def centred_rate(window: np.ndarray, dt: float) -> float:
+    """dT/dt at the middle of an odd ``window`` of temperatures: the slope of its centred
+    linear least-squares fit, :func:`savgol_slope`'s value inside a series (the derivative
+    of a centred quadratic fit is the centred line's slope)."""
+    h = (window.size - 1) // 2
+    j = np.arange(-h, h + 1, dtype=float)
+    return float(window @ j / float(j @ j) / dt)
 
 
 def savgol_slope(x: np.ndarray, w: int, dt: float) -> np.ndarray:

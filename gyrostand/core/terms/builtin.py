@@ -240,6 +240,7 @@ class TempRate(Term):
     name = "temp_rate"
     params = (Param("k", "linear", "y*s/degC", "sensitivity to the temperature rate"),
               LAG_PARAM)
+    rate_input = True
     math = "+ k·dT_g/dt,  dT_g/dt = (T − T_g)/τ"
     bit = 6
     look_alikes = {
@@ -279,6 +280,7 @@ class Hysteresis(Term):
     """
 
     name = "hysteresis"
+    rate_input = True
     params = (
         Param("h", "linear", "y", "half the heating/cooling offset difference"),
         LAG_PARAM,
