@@ -282,3 +282,34 @@ class OnlineLKF:
     @property
     def covariance(self) -> np.ndarray:
         return self.P.copy()
+
+
+#: a constant output term (``constant``: the bias) enters as an input of the drift:
+#: y = ε + b with dε/dt = −βε + γT is, for ε' = ε + b, dε'/dt = −βε' + γT + βb: the
+#: coefficient c = βb of the input u ≡ 1 (named ``<term>.beta_<param>``, e.g.
+#: ``bias.beta_b``). The δβ column then runs along the filtered *measured* level ε̂', which
+#: the data pin down; as an output state δb is confounded with δε's level, and the dropped
+#: δβ·δε term biases β (measured: β −30 % with a 4× too small std on a 6-h chamber record)
+BIAS_RATE = "bias.beta_b"
+
+
+def offset_term(model: Model) -> tuple[Term, str, str] | None:
+    """The constant output term entered as c = βb: ``(term, internal name, parameter)``."""
+    for t in model.terms:
+        if t.constant and t.role == "output" and len(t.linear) == 1:
+            lin = t.linear[0]
+            return t, f"{t.name}.beta_{lin.split('.', 1)[1]}", lin
+    return None
+
+
+def soaked_prior(P: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """Prior of ``[δε, δθ…]`` when δε(0) = J δθ + s: Cov = [[J Pθ J' + var s, J Pθ],
+    [Pθ J', Pθ]] with ``Pθ`` the diagonal of P beyond row 0 and ``var s = P[0, 0]``."""
+    out = P.copy()
+    pt = np.diag(P).copy()
+    pt[0] = 0.0
+    jp = J * pt
+    out[0, 0] = P[0, 0] + float(J @ jp)
+    out[0, 1:] = jp[1:]
+    out[1:, 0] = jp[1:]
+    return out

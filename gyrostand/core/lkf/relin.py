@@ -20,19 +20,10 @@ reach the exact-likelihood accuracy (measured by ``benchmarks/lkf_accuracy.py``)
    (bounded Brent in ln ratio). Other processes (``random_walk``, ``markov2``) keep their
    ratio to σ.
 
-4. **A rate term's dT/dt centred, half a window late.** A term whose regressor is the
-   temperature rate (``temp_rate``, ``hysteresis``: ``Term.rate_input``) gets each bin's
-   rate as ML computes it, the slope of the ``RATE_WINDOW_S`` window centred on the bin
-   (:func:`~gyrostand.core.terms.base.temperature_rate`), so each bin is filtered once the
-   half window after it is in (30 bins at Δt = 1 s; :meth:`RelinLKF.flush` takes the
-   waiting ones at stop with the record's end rates). A causal slope of the last window is
-   the centred one 30 s late: at every corner of a ramp the regressor was wrong for a
-   minute, and the estimate of k with it. Measured on 30 6-h chamber runs
-   (``benchmarks/lkf_accuracy.py``'s), temp_rate.k's error in its std at every 100-s
-   checkpoint, whatever the status: RMS 1.66 / 1.48 / 1.72 (before 12,000 s / to 17,000 s /
-   after) and beyond ±3 std in 8.0 % / 8.5 % / 7.9 % of checkpoints with the causal
-   slope; 1.14 / 1.23 / 1.33 and 1.0 % / 5.7 % / 3.1 % centred (the ML fit of the whole
-   record: 1.33).
+4. **A rate term's dT/dt centred** (:mod:`~gyrostand.core.lkf.centred`): with
+   ``temp_rate`` or ``hysteresis`` in the model each bin goes through once the half rate
+   window after it is in (30 bins at Δt = 1 s; :meth:`RelinLKF.flush` at stop), with ML's
+   rate for it.
 
 Between re-linearisations the filter runs one bin at a time at the last point (cost: one
 small Kalman step). ``soaked=True`` starts ε₀ in equilibrium with the first temperature,
@@ -44,23 +35,29 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 
 import numpy as np
 
 from ...errors import ModelError
 from ..kalman import foh_weights
 from ..model import Model
-from ..terms.base import Bin, Context, Scales, Term, centred_rate, rate_window, temperature_rate
+from ..terms.base import Bin, Context, Scales, Term
+from .centred import CentredRates
 from .kernel import lkf_pass
 from .noise import BOUND_STEP as BOUND_STEP  # re-exported (moved to lkf_noise)
 from .noise import NOISE_STEP as NOISE_STEP
 from .noise import RATIO_BOUNDS as RATIO_BOUNDS
 from .noise import inflation, reestimate
-from .online import ONLINE_RATE_WINDOW, causal_rate, default_prior_std, lkf_terms
-from .schedule import RelinSchedule
+from .online import (
+    ONLINE_RATE_WINDOW,
+    causal_rate,
+    default_prior_std,
+    lkf_terms,
+    offset_term,
+    soaked_prior,
+)
+from .schedule import Relinearization, RelinSchedule
 from .squarem import fixed_point
 
 log = logging.getLogger(__name__)
@@ -72,36 +69,6 @@ BETA_MAX_DT = 1.0
 #: ONLINE_SETTLE_SIGMA: the next one, ``relinearize_every`` bins later, goes on from there
 SETTLE_SIGMA = 1e-3
 ONLINE_SETTLE_SIGMA = 2e-2
-#: a constant output term (``constant``: the bias) enters as an input of the drift:
-#: y = ε + b with dε/dt = −βε + γT is, for ε' = ε + b, dε'/dt = −βε' + γT + βb: the
-#: coefficient c = βb of the input u ≡ 1 (named ``<term>.beta_<param>``, e.g.
-#: ``bias.beta_b``). The δβ column then runs along the filtered *measured* level ε̂', which
-#: the data pin down; as an output state δb is confounded with δε's level, and the dropped
-#: δβ·δε term biases β (measured: β −30 % with a 4× too small std on a 6-h chamber record)
-BIAS_RATE = "bias.beta_b"
-
-
-def _offset(model: Model) -> tuple[Term, str, str] | None:
-    """The constant output term entered as c = βb: ``(term, internal name, parameter)``."""
-    for t in model.terms:
-        if t.constant and t.role == "output" and len(t.linear) == 1:
-            lin = t.linear[0]
-            return t, f"{t.name}.beta_{lin.split('.', 1)[1]}", lin
-    return None
-
-
-@dataclass(frozen=True)
-class Relinearization:
-    """What the last re-linearisation did: ``passes`` filter passes, ``settled``, the
-    largest move of a coefficient from the estimate before it (in its std), ``bins``."""
-
-    bins: int
-    passes: int
-    settled: bool
-    step_sigma: float
-    noise: Mapping[str, float]
-    noise_at_bound: bool = False  # the drift's noise vanished against σ_v (the search's
-    # upper bound of σ_v/σ), or a single searched level at a bound
 
 
 class RelinLKF:
@@ -130,7 +97,7 @@ class RelinLKF:
                  prior_std: Mapping[str, float] | None = None, max_passes: int = 30):
         terms = lkf_terms(model)  # a ModelError naming any term the filter cannot represent
         self.model, self.dt = model, float(dt)
-        off = _offset(model)
+        off = offset_term(model)
         offset = off[0] if off else None
         self._offset_key: str | None = off[1] if off else None
         self.inputs = [k for k, _ in terms.inputs]
@@ -172,10 +139,8 @@ class RelinLKF:
         self._E = np.empty(cap)
         self._F = np.empty(cap)
         self._Tbuf: list[float] = []
-        #: bins a rate term's centred dT/dt waits for (half the rate window; 0: none)
-        self.lag = (rate_window(self.dt) - 1) // 2 if any(
-            t.rate_input for _, t in self.output_terms) else 0
-        self._pending: deque[tuple[float, float]] = deque()
+        #: bins waiting for a rate term's centred dT/dt (:mod:`.centred`)
+        self._waiting = CentredRates(self.dt, any(t.rate_input for _, t in self.output_terms))
         self._rate_now = math.nan
         self._bin_memory: dict = {}  # causal filters of the rate (Bin.lagged_rate)
         self.last: Relinearization | None = None
@@ -252,7 +217,7 @@ class RelinLKF:
             for j in range(len(self.inputs)):
                 J[2 + j] = self._u(j, T0) / b0
             P[0, 0] = self.held["markov.sigma"] ** 2
-            P = _soaked_prior(P, J)
+            P = soaked_prior(P, J)
         else:
             xo = self.point[1 + len(self.inputs):]
             eps0 = y0 - float(xo @ self._X[0]) if len(xo) else y0
@@ -296,7 +261,7 @@ class RelinLKF:
 
     def _causal_rate(self) -> float:
         if self.lag:
-            return self._rate_now  # centred, set by _take_pending
+            return self._rate_now  # centred (.centred), set as the bin goes in
         return causal_rate(self._Tbuf, self.dt)
 
     def _context(self) -> Context:
@@ -305,9 +270,9 @@ class RelinLKF:
         n = self.n
         ctx = Context(t=self.dt * np.arange(n), temp=self._T[:n].copy(), dt=self.dt,
                       modifiers=self.model.modifiers)
-        if self._pending:
-            temps = np.concatenate([self._T[:n], [b[1] for b in self._pending]])
-            ctx._cache["rate"] = temperature_rate(temps, self.dt)[:n]
+        rates = self._waiting.rates_of(self._T[:n])
+        if rates is not None:
+            ctx._cache["rate"] = rates
         return ctx
 
     def _U(self) -> np.ndarray:
@@ -329,48 +294,30 @@ class RelinLKF:
         computes them); else each output term's causal one. With a rate term (``lag`` > 0)
         and none given, the bin waits until ``lag`` later ones are in, and its rate is the
         centred one (module docstring); :meth:`flush` takes the waiting bins at stop."""
-        if self.n == 0 and not self._pending and math.isnan(y):
+        if self.n == 0 and not self.pending and math.isnan(y):
             return  # the filter starts at the first observed bin
         if regressors is not None or not self.lag:
             self._take(y, T, regressors)
             return
-        self._pending.append((y, T))
-        h = self.lag
-        if self.n == 0:
-            if len(self._pending) < 2 * h + 1:
-                return
-            # the first bins: the rate of the first window's quadratic, as ML's at the start
-            rates = temperature_rate(np.array([b[1] for b in self._pending]), self.dt)
-            for k in range(h + 1):
-                self._take_pending(float(rates[k]))
-            return
-        while len(self._pending) > h:
-            window = np.concatenate([self._T[self.n - h: self.n],
-                                     [b[1] for b in self._pending]])[: 2 * h + 1]
-            self._take_pending(centred_rate(window, self.dt))
+        for y0, T0, rate in self._waiting.push(y, T, lambda: self._T[: self.n]):
+            self._rate_now = rate
+            self._take(y0, T0, None)
 
     def flush(self) -> None:
-        """Take every bin still waiting for its centred rate (at stop): the rates at the
-        record's end, as ML's (the last window's quadratic)."""
-        if not self._pending:
-            return
-        m = len(self._pending)
-        tail = np.concatenate([self._T[max(self.n - rate_window(self.dt), 0): self.n],
-                               [b[1] for b in self._pending]])
-        rates = temperature_rate(tail, self.dt)[-m:]
-        for r in rates:
-            self._take_pending(float(r))
+        """Take every bin still waiting for its centred rate (at stop)."""
+        for y0, T0, rate in self._waiting.flush(self._T[: self.n]):
+            self._rate_now = rate
+            self._take(y0, T0, None)
+
+    @property
+    def lag(self) -> int:
+        """Bins a bin waits for (a rate term's centred dT/dt; 0: none)."""
+        return self._waiting.lag
 
     @property
     def pending(self) -> int:
         """Bins received and not yet filtered (waiting for their centred rate)."""
-        return len(self._pending)
-
-    def _take_pending(self, rate: float) -> None:
-        """Filter the oldest waiting bin with temperature rate ``rate``."""
-        y, T = self._pending.popleft()
-        self._rate_now = rate
-        self._take(y, T, None)
+        return len(self._waiting)
 
     def _take(self, y: float, T: float, regressors: np.ndarray | None) -> None:
         """Filter one bin (:meth:`update`)."""
@@ -537,16 +484,3 @@ class RelinLKF:
     def drift(self) -> float:
         """Filtered drift ε̂ = ε₀ + δε̂ at the newest bin (without output terms)."""
         return float(self._st[0] + self.x[0])
-
-
-def _soaked_prior(P: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """Prior of ``[δε, δθ…]`` when δε(0) = J δθ + s: Cov = [[J Pθ J' + var s, J Pθ],
-    [Pθ J', Pθ]] with ``Pθ`` the diagonal of P beyond row 0 and ``var s = P[0, 0]``."""
-    out = P.copy()
-    pt = np.diag(P).copy()
-    pt[0] = 0.0
-    jp = J * pt
-    out[0, 0] = P[0, 0] + float(J @ jp)
-    out[0, 1:] = jp[1:]
-    out[1:, 0] = jp[1:]
-    return out

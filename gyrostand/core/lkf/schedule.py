@@ -21,9 +21,10 @@ measures it).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-__all__ = ["GROWTH", "UNSETTLED_PASSES", "RelinSchedule"]
+__all__ = ["GROWTH", "UNSETTLED_PASSES", "RelinSchedule", "Relinearization"]
 
 #: the next re-linearisation ``max(every, GROWTH·n)`` bins after the one at n
 GROWTH = 0.1
@@ -62,3 +63,17 @@ class RelinSchedule:
         elif self.unsettled_since is None:
             self.unsettled_since, self.unsettled_passes = n, passes
         self.due = n + max(self.every, int(round(GROWTH * n)))
+
+
+@dataclass(frozen=True)
+class Relinearization:
+    """What the last re-linearisation did: ``passes`` filter passes, ``settled``, the
+    largest move of a coefficient from the estimate before it (in its std), ``bins``."""
+
+    bins: int
+    passes: int
+    settled: bool
+    step_sigma: float
+    noise: Mapping[str, float]
+    noise_at_bound: bool = False  # the drift's noise vanished against σ_v (the search's
+    # upper bound of σ_v/σ), or a single searched level at a bound
