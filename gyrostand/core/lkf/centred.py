@@ -21,11 +21,10 @@ the whole record: 1.33). On 300 such runs the band's checkpoints short of 0.98 a
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from ..terms.base import centred_rate, rate_window, temperature_rate
+from ..terms.base import rate_window, temperature_rate
 
 __all__ = ["CentredRates"]
 
@@ -38,32 +37,34 @@ class CentredRates:
         self.dt = float(dt)
         self.lag = (rate_window(self.dt) - 1) // 2 if active else 0
         self._bins: deque[tuple[float, float]] = deque()
+        h = self.lag
+        j = np.arange(-h, h + 1, dtype=float)
+        #: the centred line's slope as a weighted sum of the window (savgol_slope's kernel)
+        self._kernel = j / float(j @ j) / self.dt
+        #: the last 2·lag + 1 temperatures received (the oldest waiting bin's in the middle)
+        self._last = np.zeros(2 * h + 1)
+        self._started = False
 
     def __len__(self) -> int:
         return len(self._bins)
 
-    def push(self, y: float, T: float, filtered: Callable[[], np.ndarray]
-             ) -> Iterator[tuple[float, float, float]]:
-        """Add a bin; yield ``(y, T, rate)`` of each bin now ready, oldest first.
-        ``filtered()``: the temperatures of the bins the filter has taken so far (asked
-        again for each bin: take one before asking for the next)."""
+    def push(self, y: float, T: float) -> list[tuple[float, float, float]]:
+        """Add a bin; return ``(y, T, rate)`` of each bin now ready, oldest first: none
+        until the first window is in, then its first ``lag`` + 1 bins, then one a bin."""
         self._bins.append((y, T))
+        last = self._last
+        last[:-1] = last[1:]
+        last[-1] = T
         h = self.lag
-        if len(filtered()) == 0:
+        if not self._started:
             if len(self._bins) < 2 * h + 1:
-                return
+                return []
             # the first window: its quadratic's slopes, as ML's series at its start
-            rates = temperature_rate(np.array([b[1] for b in self._bins]), self.dt)
-            for k in range(h + 1):
-                y0, T0 = self._bins.popleft()
-                yield y0, T0, float(rates[k])
-            return
-        while len(self._bins) > h:
-            past = filtered()
-            window = np.concatenate([past[len(past) - h:],
-                                     [b[1] for b in self._bins]])[: 2 * h + 1]
-            y0, T0 = self._bins.popleft()
-            yield y0, T0, centred_rate(window, self.dt)
+            self._started = True
+            rates = temperature_rate(last, self.dt)
+            return [(*self._bins.popleft(), float(rates[k])) for k in range(h + 1)]
+        y0, T0 = self._bins.popleft()
+        return [(y0, T0, float(last @ self._kernel))]
 
     def flush(self, filtered_T: np.ndarray) -> list[tuple[float, float, float]]:
         """Every waiting bin with its rate at the record's end (the last window's
@@ -76,6 +77,7 @@ class CentredRates:
         rates = temperature_rate(tail, self.dt)[-m:]
         out = [(y, T, float(r)) for (y, T), r in zip(self._bins, rates, strict=True)]
         self._bins.clear()
+        self._started = False  # a bin after it starts a window of its own
         return out
 
     def rates_of(self, filtered_T: np.ndarray) -> np.ndarray | None:

@@ -299,7 +299,7 @@ class RelinLKF:
         if regressors is not None or not self.lag:
             self._take(y, T, regressors)
             return
-        for y0, T0, rate in self._waiting.push(y, T, lambda: self._T[: self.n]):
+        for y0, T0, rate in self._waiting.push(y, T):
             self._rate_now = rate
             self._take(y0, T0, None)
 

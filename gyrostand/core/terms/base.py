@@ -450,15 +450,6 @@ def temperature_rate(temp: np.ndarray, dt: float) -> np.ndarray:
     return savgol_slope(temp, w, dt)
 
 
-def centred_rate(window: np.ndarray, dt: float) -> float:
-    """dT/dt at the middle of an odd ``window`` of temperatures: the slope of its centred
-    linear least-squares fit, :func:`savgol_slope`'s value inside a series (the derivative
-    of a centred quadratic fit is the centred line's slope)."""
-    h = (window.size - 1) // 2
-    j = np.arange(-h, h + 1, dtype=float)
-    return float(window @ j / float(j @ j) / dt)
-
-
 def savgol_slope(x: np.ndarray, w: int, dt: float) -> np.ndarray:
     """First derivative of a local quadratic least-squares fit over an odd window of ``w``
     samples (Savitzky–Golay, polynomial order 2, scipy's ``savgol_filter(x, w, 2, deriv=1,
