@@ -40,7 +40,7 @@ class CentredRates:
         h = self.lag
         j = np.arange(-h, h + 1, dtype=float)
         #: the centred line's slope as a weighted sum of the window (savgol_slope's kernel)
-        self._kernel = j / float(j @ j) / self.dt
+        self._kernel = j / max(float(j @ j), 1.0) / self.dt
         #: the last 2·lag + 1 temperatures received (the oldest waiting bin's in the middle)
         self._last = np.zeros(2 * h + 1)
         self._started = False
