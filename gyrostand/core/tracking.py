@@ -258,9 +258,9 @@ class LkfTrack:
         f = self.filter
         if isinstance(f, RelinLKF):
             f.flush()  # the bins still waiting for their centred rate
-        if isinstance(f, RelinLKF) and f.n > 0:
-            f.relinearize()
-            self._refresh_nis()
+            if f.n > 0:
+                f.relinearize()
+                self._refresh_nis()
 
     def update(self, y: float, T: float) -> None:
         if not math.isnan(y):

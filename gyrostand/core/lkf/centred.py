@@ -24,7 +24,7 @@ from collections import deque
 
 import numpy as np
 
-from ..terms.base import rate_window, temperature_rate
+from ..terms.base import rate_window, slope_kernel, temperature_rate
 
 __all__ = ["CentredRates"]
 
@@ -38,9 +38,8 @@ class CentredRates:
         self.lag = (rate_window(self.dt) - 1) // 2 if active else 0
         self._bins: deque[tuple[float, float]] = deque()
         h = self.lag
-        j = np.arange(-h, h + 1, dtype=float)
-        #: the centred line's slope as a weighted sum of the window (savgol_slope's kernel)
-        self._kernel = j / max(float(j @ j), 1.0) / self.dt
+        #: the centred line's slope as a weighted sum of the window (none when no bin waits)
+        self._kernel = slope_kernel(2 * h + 1, self.dt) if h else np.zeros(1)
         #: the last 2·lag + 1 temperatures received (the oldest waiting bin's in the middle)
         self._last = np.zeros(2 * h + 1)
         self._started = False

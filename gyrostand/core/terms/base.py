@@ -450,6 +450,15 @@ def temperature_rate(temp: np.ndarray, dt: float) -> np.ndarray:
     return savgol_slope(temp, w, dt)
 
 
+def slope_kernel(w: int, dt: float) -> np.ndarray:
+    """The weights of the centred linear least-squares slope over an odd window of ``w``
+    samples, ``j / Σ j² / dt`` (j = −h..h, h = (w − 1)/2): :func:`savgol_slope` inside a
+    series is the window's dot product with them."""
+    h = (w - 1) // 2
+    j = np.arange(-h, h + 1, dtype=float)
+    return j / float(j @ j) / dt
+
+
 def savgol_slope(x: np.ndarray, w: int, dt: float) -> np.ndarray:
     """First derivative of a local quadratic least-squares fit over an odd window of ``w``
     samples (Savitzky–Golay, polynomial order 2, scipy's ``savgol_filter(x, w, 2, deriv=1,
@@ -463,8 +472,7 @@ def savgol_slope(x: np.ndarray, w: int, dt: float) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     n, h = x.size, (w - 1) // 2
-    j = np.arange(-h, h + 1, dtype=float)
-    kernel = j / float(j @ j) / dt
+    kernel = slope_kernel(w, dt)
     out = np.empty(n)
     # np.convolve flips its second argument: correlate with the kernel
     out[h:n - h] = np.convolve(x, kernel[::-1], mode="valid")
