@@ -176,7 +176,35 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
                 continue
         if not warnings:
             prev = cov
+    if not any(w.startswith("the likelihood is flat") for w in warnings):
+        warnings += collinear(gls_info, list(prob.lin_free))
     return cov, warnings
+
+
+#: an eigenvalue of the coefficients' information (normalised to a unit diagonal) below
+#: this: regressors the data cannot tell apart (a constant temperature's response beside
+#: the bias)
+COLLINEAR = 1e-10
+
+
+def collinear(info: np.ndarray, names: list[str]) -> list[str]:
+    """The 'flat' warning for coefficients whose regressors are collinear — read from
+    their GLS information exactly, where the numerical Hessian of a flat direction is
+    rounding noise either way (a constant temperature's response and the bias: a std of
+    180 or of 0.05 for β at optima 1e-8 apart)."""
+    if info.shape[0] < 2:
+        return []
+    d = np.sqrt(np.abs(np.diag(info)))
+    if not np.all(d > 0) or not np.all(np.isfinite(info)):
+        return []
+    lam, V = np.linalg.eigh(info / np.outer(d, d))
+    if lam.min() > COLLINEAR * max(float(lam.max()), 1.0):
+        return []
+    bad = V[:, lam <= COLLINEAR * max(float(lam.max()), 1.0)]
+    involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
+    return ["the likelihood is flat along a combination of "
+            f"{', '.join(involved)}: their regressors are collinear in these data (not "
+            "identifiable; their stds mean nothing)"]
 
 
 def _alone_variance(hii: float, noise_scale: float) -> float:

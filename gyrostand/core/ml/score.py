@@ -41,11 +41,26 @@ listen()
 
 #: step of the central differences of the state space and regressors in log parameters
 STEP = 1e-6
+#: ∂P has settled (with P repeated bit for bit) when no entry moved by more than this
+#: fraction of its parameter's largest entry since the previous sample: its recursion,
+#: a contraction once P is fixed, ends in a cycle of values a few units in the last place
+#: apart (sample-to-sample cancellations of ∂P − 2K∂P + K²∂P), which bit-for-bit
+#: equality never accepted: the kernel then recomputed ∂P at every sample
+#: (3.4 ms a pass where the filter takes 1.0, 6-h run). A step of 1e-13 of a contraction
+#: by ρ leaves ∂P within 1e-13/(1 − ρ) of its fixed point.
+DP_SETTLED = 1e-13
 
 
 def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndarray:
     """∂ ln L / ∂z of ``prob`` (a :class:`~.fit.Problem`) at ``z``, its GLS coefficients
     ``theta`` (free linear parameters) and scale ``s2`` (1 when not concentrated)."""
+    return score_pass(prob, z, theta, s2)[0]
+
+
+def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
+               ) -> tuple[np.ndarray, int]:
+    """:func:`score`, and the number of observed samples at which the pass recomputed
+    the covariance and its derivatives (before its steady state, after a gap)."""
     p = prob.unpack(z)
     d = z.size
     model, dt = prob.model, prob.samples.dt
@@ -76,10 +91,11 @@ def score(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float) -> np.ndar
             du[j] /= 2 * STEP
     # u's NaN (a missing sample) is du's too: the kernel tests u
     ready("score_run")  # a first run: compiled beside this process (..prewarm)
+    work = score_work(n, d)
     g_logf, g_s = _score_run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
                              writable(prob.weights), writable(u), dphi, dq, dp0, dr, du,
-                             *score_work(n, d))
-    return -0.5 * (g_logf + g_s / s2)
+                             *work)
+    return -0.5 * (g_logf + g_s / s2), int(work[-1][0])
 
 
 def score_work(n: int, d: int) -> tuple[np.ndarray, ...]:
@@ -87,10 +103,11 @@ def score_work(n: int, d: int) -> tuple[np.ndarray, ...]:
     allocated here: numba compiles each ``np.zeros``/``np.empty`` of a kernel for its own
     rank, and its 13 allocations were 0.6 of the kernel's 2.1 s of compilation on a first
     run (measured in a fresh process). ``x, P, dx, dP, PH, dPH, K, dK, df, g_logf, g_s,
-    P_last, dP_last``: the kernel's start values (zeros) where it reads them first."""
+    P_last, dP_last, unsettled``: the kernel's start values (zeros) where it reads them
+    first (``unsettled``, one entry: the count of samples that recomputed P and ∂P)."""
     return (np.zeros(n), np.zeros((n, n)), np.zeros((d, n)), np.zeros((d, n, n)),
             np.empty(n), np.empty((d, n)), np.empty(n), np.empty((d, n)), np.empty(d),
-            np.zeros(d), np.zeros(d), np.empty((n, n)), np.empty((d, n, n)))
+            np.zeros(d), np.zeros(d), np.empty((n, n)), np.empty((d, n, n)), np.zeros(1))
 
 
 def _columns(prob: Problem, terms, p) -> dict[str, np.ndarray]:
@@ -126,14 +143,16 @@ def _moved_by(prob: Problem, name: str, p) -> tuple:
 
 @njit(cache=True, nogil=True)
 def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover - compiled
-               x, P, dx, dP, PH, dPH, K, dK, df, g_logf, g_s, P_last, dP_last):
+               x, P, dx, dP, PH, dPH, K, dK, df, g_logf, g_s, P_last, dP_last,
+               unsettled):
     """(Σ ∂f/f, Σ ∂(e²/f)) per parameter: the tangent-linear filter of ``u``; its state
-    and work arrays (``x`` ... ``dP_last``) as :func:`score_work` allocates them; returns
+    and work arrays (``x`` ... ``unsettled``) as :func:`score_work` allocates them; returns
     ``g_logf`` and ``g_s``, filled in place.
 
-    Steady state as :func:`~gyrostand.core.kalman._kf_run`'s, exactly: once two consecutive
-    observed samples with the same R start from bit-identical P and ∂P, the gains, f and
-    their derivatives repeat, and only the states and their derivatives are updated.
+    Steady state as :func:`~gyrostand.core.kalman._kf_run`'s: once two consecutive
+    observed samples with the same R start from bit-identical P, and ∂P has settled
+    (:data:`DP_SETTLED`), the gains, f and their derivatives are held, and only the states
+    and their derivatives are updated.
 
     P and ∂P are symmetric (diagonal at the start, every update symmetric in a, b): the
     upper triangle is computed and mirrored, the same floating-point numbers as the whole
@@ -148,6 +167,7 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover 
             dP[j, i, i] = dp0[j, i]
     r_last = np.nan
     f = 0.0
+    invf = 0.0
     steady = False
     weighted = rw.shape[0] == N
     for k in range(N):
@@ -159,6 +179,7 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover 
             if steady and rk != r_last:
                 steady = False
             if not steady:
+                unsettled[0] += 1.0
                 f_last = f
                 f = sum_variance(P, PH, rk)  # f = 1'P1 + R_k, PH = P1
                 if f <= 0.0:
@@ -166,6 +187,7 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover 
                         g_logf[j] = np.nan
                         g_s[j] = np.nan
                     return g_logf, g_s
+                invf = 1.0 / f
                 for i in range(n):
                     K[i] = PH[i] / f
                 for j in range(d):
@@ -185,10 +207,18 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover 
                         if same and P[a, b] != P_last[a, b]:
                             same = False
                         P_last[a, b] = P[a, b]
-                        for j in range(d):
-                            if same and dP[j, a, b] != dP_last[j, a, b]:
-                                same = False
-                            dP_last[j, a, b] = dP[j, a, b]
+                # ∂P (P repeated): settled to DP_SETTLED of its size since the last sample
+                for j in range(d):
+                    big = 0.0
+                    moved = 0.0
+                    for a in range(n):
+                        for b in range(a, n):
+                            v = dP[j, a, b]
+                            big = max(big, abs(v))
+                            moved = max(moved, abs(v - dP_last[j, a, b]))
+                            dP_last[j, a, b] = v
+                    if moved > DP_SETTLED * big:
+                        same = False
                 r_last = rk
                 steady = same
             hx = 0.0
@@ -200,8 +230,9 @@ def _score_run(phi, q, p0, r, rw, u, dphi, dq, dp0, dr, du,  # pragma: no cover 
                 for i in range(n):
                     dhx += dx[j, i]
                 dej = du[j, k] - dhx
-                g_logf[j] += df[j] / f
-                g_s[j] += (2.0 * e * dej - e * e * df[j] / f) / f
+                cj = df[j] * invf
+                g_logf[j] += cj
+                g_s[j] += (2.0 * e * dej - e * e * cj) * invf
                 for i in range(n):
                     dx[j, i] += dK[j, i] * e + K[i] * dej
             for i in range(n):
