@@ -57,6 +57,7 @@ from threadpoolctl import threadpool_limits
 from ...errors import GyrostandError
 from ..chisq import chi2_sf, sup_chi2_sf
 from ..data import Samples
+from ..ml.cov import FLAT_WARNING
 from ..ml.fit import ml
 from ..ml.joint_problem import base_name
 from ..model import Model
@@ -183,7 +184,7 @@ def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tu
             if model.kind(base_name(k)) == "time" and not abs(r.parameters[k].value) >= 2.0 * r.parameters[k].std:
                 ok = False
     for w in r.warnings:
-        if w.startswith("the likelihood is flat") and any(k in w for k in new):
+        if w.startswith(FLAT_WARNING) and any(k in w for k in new):
             ok = False
     bound = tuple(k for k in r.info.get("at_bound", ()) if k in new and
                   model.kind(base_name(k)) in POSITIVE_KINDS

@@ -51,6 +51,24 @@ def hessian(fun, x: np.ndarray, h: np.ndarray, evaluate=None) -> np.ndarray:
     return H
 
 
+#: an eigenvalue of an information matrix normalised to a unit diagonal at or below this
+#: fraction of the largest (at least 1): a direction along which the likelihood is flat
+FLAT = 1e-10
+#: how the warning of a flat direction begins (the candidates' table reads it)
+FLAT_WARNING = "the likelihood is flat along a combination of "
+
+
+def _flat(lam: np.ndarray, V: np.ndarray, names: list[str]
+          ) -> tuple[float, list[str] | None]:
+    """The floor of the eigenvalues ``lam`` (eigenvectors ``V``) of a unit-diagonal
+    information, and the parameters its flat directions involve (None: none is flat)."""
+    floor = max(float(lam.max()), 1.0) * FLAT
+    if lam.min() > floor:
+        return floor, None
+    bad = V[:, lam <= floor]
+    return floor, sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
+
+
 def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray, list[str]]:
     """Inverse of the observed information −H, kept symmetric positive definite.
 
@@ -63,14 +81,10 @@ def covariance_from_hessian(H: np.ndarray, names: list[str]) -> tuple[np.ndarray
     Jn = J / np.outer(scale, scale)
     lam, V = np.linalg.eigh(Jn)
     warnings = []
-    floor = max(lam.max(), 1.0) * 1e-10
-    if lam.min() <= floor:
-        bad = V[:, lam <= floor]
-        involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
-        warnings.append(
-            "the likelihood is flat along a combination of "
-            f"{', '.join(involved)}: not identifiable from these data (their stds are huge)"
-        )
+    floor, involved = _flat(lam, V, names)
+    if involved is not None:
+        warnings.append(f"{FLAT_WARNING}{', '.join(involved)}: not identifiable from these "
+                        "data (their stds are huge)")
         lam = np.maximum(lam, floor)
     cov = (V / lam) @ V.T / np.outer(scale, scale)
     return 0.5 * (cov + cov.T), warnings
@@ -176,35 +190,27 @@ def observed_covariance(model: Model, samples: Samples, p: dict[str, float], fre
                 continue
         if not warnings:
             prev = cov
-    if not any(w.startswith("the likelihood is flat") for w in warnings):
+    if not any(w.startswith(FLAT_WARNING) for w in warnings):
         warnings += collinear(gls_info, list(prob.lin_free))
     return cov, warnings
 
 
-#: an eigenvalue of the coefficients' information (normalised to a unit diagonal) below
-#: this: regressors the data cannot tell apart (a constant temperature's response beside
-#: the bias)
-COLLINEAR = 1e-10
-
-
 def collinear(info: np.ndarray, names: list[str]) -> list[str]:
-    """The 'flat' warning for coefficients whose regressors are collinear — read from
-    their GLS information exactly, where the numerical Hessian of a flat direction is
-    rounding noise either way (a constant temperature's response and the bias: a std of
-    180 or of 0.05 for β at optima 1e-8 apart)."""
+    """The 'flat' warning for coefficients whose regressors are collinear (a constant
+    temperature's response beside the bias) — read from their GLS information exactly,
+    where the numerical Hessian of a flat direction is rounding noise either way (a std
+    of 180 or of 0.05 for β at optima 1e-8 apart); the same test as
+    :func:`covariance_from_hessian`'s (:data:`FLAT`)."""
     if info.shape[0] < 2:
         return []
     d = np.sqrt(np.abs(np.diag(info)))
     if not np.all(d > 0) or not np.all(np.isfinite(info)):
         return []
-    lam, V = np.linalg.eigh(info / np.outer(d, d))
-    if lam.min() > COLLINEAR * max(float(lam.max()), 1.0):
+    _, involved = _flat(*np.linalg.eigh(info / np.outer(d, d)), names)
+    if involved is None:
         return []
-    bad = V[:, lam <= COLLINEAR * max(float(lam.max()), 1.0)]
-    involved = sorted({names[i] for i in np.flatnonzero(np.abs(bad).max(axis=1) > 0.3)})
-    return ["the likelihood is flat along a combination of "
-            f"{', '.join(involved)}: their regressors are collinear in these data (not "
-            "identifiable; their stds mean nothing)"]
+    return [f"{FLAT_WARNING}{', '.join(involved)}: their regressors are collinear in these "
+            "data (not identifiable; their stds mean nothing)"]
 
 
 def _alone_variance(hii: float, noise_scale: float) -> float:
