@@ -170,14 +170,31 @@ class Model:
 
     def regressors(self, p: Mapping[str, float], ctx: Context) -> np.ndarray:
         """Regressor matrix, shape (N, n_linear), columns in ``names_of_kind('linear')``."""
-        cols: dict[str, np.ndarray] = {}
-        ctx = ctx.bound(self.modifiers)
-        for t in self.terms:
-            cols.update(t.regressors(p, ctx))
+        cols = self._columns(p, ctx)
         lin = self.names_of_kind("linear")
         if not lin:
             return np.zeros((ctx.t.size, 0))
         return np.column_stack([cols[n] for n in lin])
+
+    def _columns(self, p: Mapping[str, float], ctx: Context) -> dict[str, np.ndarray]:
+        """Each term's regressor columns at ``p``, by linear parameter."""
+        cols: dict[str, np.ndarray] = {}
+        ctx = ctx.bound(self.modifiers)
+        for t in self.terms:
+            cols.update(t.regressors(p, ctx))
+        return cols
+
+    def filter_input(self, p: Mapping[str, float], ctx: Context, y: np.ndarray) -> np.ndarray:
+        """``[y, X(p)]`` (N, 1 + n_linear), the Kalman filter's input: :meth:`regressors`
+        written into it column by column (one copy of them, not a matrix and then its
+        copy: ML's every new point of the search)."""
+        cols = self._columns(p, ctx)
+        lin = self.names_of_kind("linear")
+        Y = np.empty((ctx.t.size, 1 + len(lin)))
+        Y[:, 0] = y
+        for j, n in enumerate(lin):
+            Y[:, 1 + j] = cols[n]
+        return Y
 
     def state_space(self, p: Mapping[str, float], dt: float) -> StateSpace:
         """The random part compiled at ``p`` for the step ``dt`` (:class:`StateSpace`)."""

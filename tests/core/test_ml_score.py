@@ -120,3 +120,45 @@ def test_the_search_follows_the_score_not_central_differences(run):
     steps, evals, starts = r.info["iterations"], r.info["evaluations"], r.info["start_points"]
     assert steps >= 3
     assert evals - starts <= 2 * steps + 4, (evals, starts, steps)
+
+
+def test_a_term_s_own_slopes_are_its_regressors_derivatives(run):
+    """``Hysteresis.regressor_slopes`` (one tanh a step of the search instead of four)
+    against Richardson-extrapolated central differences of its regressors in ln w and
+    ln τ, and the score it gives against the score from central differences alone."""
+    from gyrostand.core.model import context
+    from gyrostand.core.terms.builtin import Hysteresis
+
+    model = Model.parse("markov,temp,white,bias,hysteresis")
+    ctx = context(run, model).bound(model.modifiers)
+    term = model.term_of("hysteresis.h")
+    fastest = float(np.max(np.abs(ctx.temp_rate)))
+    for tau, w in ((12.0, 0.05 * fastest), (300.0, 0.5 * fastest), (40.0, 0.02 * fastest)):
+        p = {"hysteresis.tau": tau, "hysteresis.w": w, "hysteresis.h": 1.0,
+             "markov.beta": 0.01}
+        for name in ("hysteresis.w", "hysteresis.tau"):
+            def col(h: float, name=name, p=p) -> np.ndarray:
+                return term.regressors({**p, name: p[name] * float(np.exp(h))}, ctx)[
+                    "hysteresis.h"]
+
+            def cd(h: float) -> np.ndarray:
+                return (col(h) - col(-h)) / (2 * h)
+
+            want = (4 * cd(5e-5) - cd(1e-4)) / 3
+            got = term.regressor_slopes(p, ctx, name)["hysteresis.h"]
+            assert np.max(np.abs(got - want)) < 1e-7 * np.max(np.abs(want)), (name, tau, w)
+    # the score with the slopes and with central differences of the regressors
+    prob = Problem(model, run, {})
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        z = np.array([rng.uniform(lo + 0.3 * (hi - lo), hi - 0.4 * (hi - lo))
+                      for lo, hi in prob.bounds])
+        _, (_, theta, s2, _) = prob.profile(z)
+        g = prob.score(z, theta, s2)
+        own = Hysteresis.regressor_slopes
+        try:
+            Hysteresis.regressor_slopes = lambda self, p, ctx, name: None  # type: ignore
+            g_cd = prob.score(z, theta, s2)
+        finally:
+            Hysteresis.regressor_slopes = own  # type: ignore
+        assert np.max(np.abs(g - g_cd)) < 1e-7 * max(1.0, float(np.max(np.abs(g_cd)))), (g, g_cd)

@@ -64,9 +64,9 @@ def test_the_kept_filter_input_gives_the_same_gram_as_a_fresh_problem(monkeypatc
           "temp.gamma": -5e-4, "bias.b": 0.3, "temp_rate.k": 5.0, "temp_rate.tau": 300.0,
           "hysteresis.h": 0.1, "hysteresis.tau": 60.0, "hysteresis.w": 0.003}
     builds = []
-    real = Model.regressors
-    monkeypatch.setattr(Model, "regressors", lambda self, p, ctx: builds.append(
-        self is model) or real(self, p, ctx))
+    real = Model.filter_input  # the kept input's builder (a fresh problem's too)
+    monkeypatch.setattr(Model, "filter_input", lambda self, p, ctx, y: builds.append(
+        self is model) or real(self, p, ctx, y))
     moved, shaped = 0, 0
     for i in range(20):  # 6 distinct rate/shape points: fewer than the 8 kept
         p = dict(p0)

@@ -9,7 +9,10 @@ a change of the numbers' last digits and not of a renderer (session 26, #25: ML'
 holds its settled covariance derivatives, so every search's gradient moved by ~1e-13
 relative; the searches stop within their tolerance of the same optima: values within 1e-7,
 standard errors within 2e-5 relative, a search-bound parameter's std ``markov2.beta`` and two
-noise levels at ~0 moved more — each of them a flat direction). Temporary paths
+noise levels at ~0 moved more — each of them a flat direction), and once more for
+``diagnose.json`` alone (session 27, #25: the hysteresis term's own regressor slopes in the
+score replace central differences of its tanh, ~1e-10 relative; its candidate's refit stops
+within 1e-8 relative of the same optimum, ln L 4e-11 higher; no other number moved). Temporary paths
 print as ``<TMP>``, a run folder's wall-clock stamp as ``<STAMP>``, this interpreter's
 ``-m gyrostand`` in a printed command as ``gyrostand``, a
 wall-clock duration as ``<S>``; the HTML report's time stamps (its own, the ledger's) as ``<NOW>``.

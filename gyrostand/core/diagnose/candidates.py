@@ -52,7 +52,6 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ...errors import GyrostandError
 from ..chisq import chi2_sf, sup_chi2_sf
@@ -63,7 +62,7 @@ from ..ml.joint_problem import base_name
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
-from ..threads import pool_width
+from ..threads import one_blas_thread, pool_width
 from .reference import moved
 from .results import TEST_CHI2, TEST_CHI2_EXTRA, TEST_MIXTURE, TEST_SIM, TEST_SUP, Candidate
 from .screen import score_tests, screenable, screened_candidate, to_refit
@@ -239,7 +238,7 @@ def _refits(samples: Samples, model: Model, base: FitResult, terms: list[str],
                    for k in big.param_names)
 
     order = sorted(range(len(terms)), key=lambda i: -searched(terms[i]))
-    with threadpool_limits(limits=1, user_api="blas"), \
+    with one_blas_thread(), \
             ThreadPoolExecutor(max_workers=workers, thread_name_prefix="refit") as pool:
         futures = {i: pool.submit(one, terms[i]) for i in order}
         return [futures[i].result() for i in range(len(terms))]

@@ -46,13 +46,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ..chisq import chi2_sf, sup_chi2_sf
 from ..data import Samples
 from ..model import Model, context
 from ..results import FitResult
 from ..terms.builtin import TERMS
+from ..threads import one_blas_thread
 from ..validate import prepare
 from .results import TEST_SCORE, TEST_SUP, Candidate
 from .shapes import efficient_metric, mean_tangents, shape_curvatures, shape_grid, shape_params
@@ -177,7 +177,7 @@ def efficient_columns(samples: Samples, model: Model, base: FitResult,
     through the current model's filter at ``base``, whitened and efficient (√M: the current
     parameters readjust), and the whitened innovations; the score statistic of any subset
     J of them is ε'C_J(C_J'C_J)⁻¹C_J'ε (the forms of :func:`~.formula.score_formula`)."""
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         used, ok, scale, eps, K, d = _whitened(samples, model, base)
         C = model.filter_columns(base.values, used, make(used))[0][ok, 1:] * scale[:, None]
         if K is not None:
@@ -215,13 +215,13 @@ def _one(samples: Samples, model: Model, base: FitResult, term: str,
 
         lkc = shape_curvatures(samples, model, base, term, seen)
         stat = best[0]
-        with threadpool_limits(limits=1, user_api="blas"):
+        with one_blas_thread():
             for point, prep in more:
                 stat = max(stat, _shape_sup(samples, model, point, term,  # type: ignore[arg-type]
                                             prep[3]))
         return Score(term, stat, 1, float(sup_chi2_sf(stat, 1, lkc)), lkc,
                      time.perf_counter() - t0)
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         stat, k = 0.0, 1
         for point, prep in preps:
             one, k = _linear_score(prep[0], model, point, term, *prep[1:])
@@ -239,7 +239,7 @@ def score_tests(samples: Samples, model: Model, base: FitResult, terms: list[str
     main thread (the compiled filter releases the GIL)."""
     if not terms:
         return {}
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         points: list[FitResult | _Point] = [base]
         if also:
             points.append(_second_point(samples, model, base, also))

@@ -10,13 +10,13 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ..data import Samples
 from ..ml.fit import Problem
 from ..model import Model, context
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS
+from ..threads import one_blas_thread
 from ..validate import prepare
 
 #: points of the log grid over a candidate's shape on which its regressor's geometry is
@@ -77,7 +77,7 @@ def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str,
     ``seen(U)``: called with each block of grid columns u(θ) as it is made (the score
     screen, :mod:`.screen`, takes Z(θ) = u(θ)'ε from the same pass).
     """
-    with threadpool_limits(limits=1, user_api="blas"):  # tiny algebra: see ml.ml
+    with one_blas_thread():  # tiny algebra: see ml.ml
         return _shape_curvatures(samples, model, base, term, seen)
 
 

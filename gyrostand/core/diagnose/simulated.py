@@ -26,7 +26,6 @@ import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ...errors import GyrostandError
 from ..chisq import chi2_sf
@@ -35,7 +34,7 @@ from ..kalman import first_order_response
 from ..ml.fit import ml
 from ..model import Model
 from ..results import FitResult
-from ..threads import pool_width
+from ..threads import one_blas_thread, pool_width
 from .prederror import deterministic_part
 
 __all__ = ["SIM_REPLICATES", "SIMULATED", "looks_random", "null_replicate", "simulated_p"]
@@ -109,7 +108,7 @@ def simulated_p(samples: Samples, model: Model, base: FitResult, term: str, lr: 
         return max(2.0 * (r1.loglik - r0.loglik), 0.0)
 
     workers = pool_width(4)
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         if workers > 1:
             with ThreadPoolExecutor(workers, thread_name_prefix="simulated") as pool:
                 lrs = np.array(list(pool.map(one, seeds)))

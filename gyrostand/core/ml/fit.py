@@ -31,7 +31,6 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ...errors import IdentificationError, ModelError
 from ..data import Samples
@@ -39,7 +38,7 @@ from ..kalman import kf_run
 from ..model import LOG_2PI, Model, context, loglik_of
 from ..results import Estimate, FitResult
 from ..terms.base import POSITIVE_KINDS
-from ..threads import pool_width
+from ..threads import one_blas_thread, pool_width
 from ..validate import prepare, require_samples
 from .cov import covariance_from_hessian as covariance_from_hessian  # re-exported
 from .cov import hessian as hessian
@@ -203,10 +202,7 @@ class Problem:
         key = tuple(p.get(n) for n in self.x_names)
         Y = self._x_cache.get(key)
         if Y is None:
-            X = self.model.regressors(p, self.ctx)
-            Y = np.empty((X.shape[0], 1 + X.shape[1]))
-            Y[:, 0] = self.samples.drift
-            Y[:, 1:] = X
+            Y = self.model.filter_input(p, self.ctx, self.samples.drift)
             with self._count:  # the oldest out: a gradient's points are near each other
                 self._x_cache = {**dict(list(self._x_cache.items())[1 - X_CACHE:]), key: Y}
         return Y
@@ -352,7 +348,7 @@ def ml(samples: Samples, model: Model, **options: Any) -> FitResult:
     tiny matrices, where OpenBLAS's thread hand-offs cost more than the work (measured:
     0.65 s → 0.24 s for a 6-hour fit, benchmarks/ml_speed.py).
     """
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return ml_fit(samples, model, **options)
 
 

@@ -38,12 +38,12 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ...errors import DataError, IdentificationError
 from ..data import Samples
 from ..model import Model
 from ..results import Estimate, FitResult, jsonable
+from ..threads import one_blas_thread
 from ..validate import prepare, require_samples
 from .cov import observed_covariance
 from .fit import lsq_beta, start_grid, starts_from
@@ -238,7 +238,7 @@ def residual_check(e: np.ndarray, f: np.ndarray) -> dict[str, Any]:
 def joint_ml(runs: Sequence[Samples], model: Model, **options: Any) -> JointFit:
     """Joint exact ML of ``model`` over ``runs`` (options as :func:`joint_ml_fit`); BLAS on
     one thread as for :func:`~gyrostand.core.ml.fit.ml`."""
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return joint_ml_fit(runs, model, **options)
 
 

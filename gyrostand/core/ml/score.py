@@ -83,12 +83,25 @@ def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
         dp0[j] = (a.p0 - b.p0) / (2 * STEP)
         dr[j] = (a.r - b.r) / (2 * STEP)
         if name in prob.x_names and Y.shape[1] > 1:
-            terms = _moved_by(prob, name, p)
-            ca, cb = _columns(prob, terms, up), _columns(prob, terms, dn)
-            for key, xa in ca.items():
-                if key in prob.linear:
-                    du[j] += (xa - cb[key]) * c[1 + prob.linear.index(key)]
-            du[j] /= 2 * STEP
+            # a term's own slopes where it gives them (Term.regressor_slopes), else
+            # central differences of its regressors
+            ctx = prob.ctx.bound(model.modifiers)
+            differenced = []
+            for t in _moved_by(prob, name, p):
+                slopes = t.regressor_slopes(p, ctx, name)
+                if slopes is None:
+                    differenced.append(t)
+                    continue
+                for key, sl in slopes.items():
+                    if key in prob.linear:
+                        du[j] += sl * c[1 + prob.linear.index(key)]
+            if differenced:
+                ca, cb = _columns(prob, differenced, up), _columns(prob, differenced, dn)
+                moved = np.zeros(u.size)
+                for key, xa in ca.items():
+                    if key in prob.linear:
+                        moved += (xa - cb[key]) * c[1 + prob.linear.index(key)]
+                du[j] += moved / (2 * STEP)
     # u's NaN (a missing sample) is du's too: the kernel tests u
     ready("score_run")  # a first run: compiled beside this process (..prewarm)
     work = score_work(n, d)
