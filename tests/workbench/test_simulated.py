@@ -208,10 +208,10 @@ def test_following_a_tie_s_second_run_ends_with_the_trend(tmp_path):
 def test_a_random_walk_s_refit_finds_the_walk_the_markov_process_absorbed(tmp_path):
     """The advice benchmark's random-walk kind, seed 511 (q 2e-3 on a 4-h record): from
     the current fit the walk's level, scanned at the current β (0.0068: the Markov process
-    absorbed the walk), stopped at q = 0 (LR 0); the refit also from the start grid's best
-    point (one local search, no standard errors unless it wins) finds the walk near the
-    truth (β 0.01, q 0.002) with LR 6.46, significant at diagnose's 0.05/8 (p 0.0055 <
-    0.00625)."""
+    absorbed the walk), stopped at q = 0 (LR 0); the refit also from the walk's profile
+    likelihood (two levels held, the rest refitted; a free fit from the better) finds the
+    walk near the truth (β 0.01, q 0.002) with LR 6.46, significant at diagnose's 0.05/8
+    (p 0.0055 < 0.00625)."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
