@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from gyrostand.core.chisq import chi2_sf
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.candidates import term_test
@@ -205,13 +207,17 @@ def test_following_a_tie_s_second_run_ends_with_the_trend(tmp_path):
     assert added == ["trend"] and adequate, (added, reasons)
 
 
-def test_a_random_walk_s_refit_finds_the_walk_the_markov_process_absorbed(tmp_path):
+@pytest.mark.parametrize("seed, lr_range, q_truth", [(511, (6.0, 7.0), 0.002),
+                                                      (506, (3.5, 4.2), 0.002)])
+def test_a_random_walk_s_refit_finds_the_walk_the_markov_process_absorbed(
+        tmp_path, seed, lr_range, q_truth):
     """The advice benchmark's random-walk kind, seed 511 (q 2e-3 on a 4-h record): from
     the current fit the walk's level, scanned at the current β (0.0068: the Markov process
     absorbed the walk), stopped at q = 0 (LR 0); the refit also from the walk's profile
     likelihood (two levels held, the rest refitted; a free fit from the better) finds the
     walk near the truth (β 0.01, q 0.002) with LR 6.46, significant at diagnose's 0.05/8
-    (p 0.0055 < 0.00625)."""
+    (p 0.0055 < 0.00625). Seed 506: ML's start grid stopped at q = 0 too (LR −0.01); the
+    profile finds the walk at q 1.46e-3 (LR 3.86, not significant there: p 0.025)."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -221,12 +227,12 @@ def test_a_random_walk_s_refit_finds_the_walk_the_markov_process_absorbed(tmp_pa
         sys.path.pop(0)
     from gyrostand.core.diagnose.candidates import refit
 
-    s = data("random_walk", 511, tmp_path)
+    s = data("random_walk", seed, tmp_path)
     m = Model.parse("markov,temp,bias")
     base = ml(s, m)
     r = refit(s, m.add("random_walk"), base)
     assert r.loglik is not None and base.loglik is not None
     lr = 2 * (r.loglik - base.loglik)
-    assert 6.0 < lr < 7.0, lr
-    assert abs(r.values["random_walk.q"] - 0.002) < 0.001, r.values
-    assert abs(r.values["markov.beta"] - 0.01) < 0.003, r.values
+    assert lr_range[0] < lr < lr_range[1], lr
+    assert abs(r.values["random_walk.q"] - q_truth) < 0.001, r.values
+    assert abs(r.values["markov.beta"] - 0.01) < 0.004, r.values
