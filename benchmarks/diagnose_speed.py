@@ -12,10 +12,13 @@ diagnose`` (screened and ``--no-screen``) against ``gyrostand identify --method 
 the same 6-h CSV, by the CPU time of each child process (the acceptance: diagnose's CPU
 <= 2.5 x identify's).
 
-Run: ``.venv/bin/python benchmarks/diagnose_speed.py [--commands-only] [--before TREE]``
-(``--commands-only``: the whole commands alone; ``--before TREE``: each command also run
-from another checkout, e.g. ``git worktree add --detach ../before REV``, pair by pair in
-the same rounds, so that both ratios are measured under the same load)
+Run: ``.venv/bin/python benchmarks/diagnose_speed.py [--commands-only] [--before TREE]
+[--rounds N]`` (``--commands-only``: the whole commands alone; ``--before TREE``: each
+command also run from another checkout, e.g. ``git worktree add --detach ../before REV``,
+pair by pair in the same rounds, so that both ratios are measured under the same load;
+``--rounds``: how many rounds the best is taken of, default 2, 3 with ``--before``: on a
+shared machine a command's CPU varies by 10-20 % from one run to the next — the same
+diagnose read 3.84 and 4.47 s in one round of two — and more rounds steady the figure)
 """
 
 from __future__ import annotations
@@ -52,14 +55,16 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     before = Path(sys.argv[sys.argv.index("--before") + 1]).resolve() \
         if "--before" in sys.argv else None
+    rounds = int(sys.argv[sys.argv.index("--rounds") + 1]) if "--rounds" in sys.argv \
+        else None
     if "--commands-only" in sys.argv:
-        commands(data(), before)
+        commands(data(), before, rounds)
         return
     s = data()
     m = Model.parse("markov,temp,bias")
     ml(s, m)  # warm-up: numba's compiled kernels are loaded from cache once per process
     stages(s, m)
-    commands(s, before)
+    commands(s, before, rounds)
 
 
 def data() -> Samples:
@@ -141,9 +146,10 @@ def child_cpu(cmd: list[str], tree: Path = ROOT) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def commands(s: Samples, before: Path | None = None) -> None:
-    """diagnose ÷ identify --method ml, CPU of whole processes on the same 6-h CSV; with
-    ``before``, the same commands of that checkout in the same rounds."""
+def commands(s: Samples, before: Path | None = None, rounds: int | None = None) -> None:
+    """diagnose ÷ identify --method ml, CPU of whole processes on the same 6-h CSV, the
+    best of ``rounds``; with ``before``, the same commands of that checkout in the same
+    rounds."""
     gyro = [sys.executable, "-m", "gyrostand"]
     trees = {"": ROOT} if before is None else {"": ROOT, "before: ": before}
     with tempfile.TemporaryDirectory() as tmp:
@@ -157,7 +163,7 @@ def commands(s: Samples, before: Path | None = None) -> None:
             child_cpu(ident, tree)
             child_cpu(diag, tree)
         cpu: dict[tuple[str, str], list[float]] = {}
-        for _ in range(2 if before is None else 3):
+        for _ in range(rounds or (2 if before is None else 3)):
             for k, cmd in rows.items():
                 for label, tree in trees.items():
                     cpu.setdefault((label, k), []).append(child_cpu(cmd, tree))
