@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -170,17 +170,20 @@ class Model:
 
     def regressors(self, p: Mapping[str, float], ctx: Context) -> np.ndarray:
         """Regressor matrix, shape (N, n_linear), columns in ``names_of_kind('linear')``."""
-        cols = self._columns(p, ctx)
+        cols = self.columns(p, ctx)
         lin = self.names_of_kind("linear")
         if not lin:
             return np.zeros((ctx.t.size, 0))
         return np.column_stack([cols[n] for n in lin])
 
-    def _columns(self, p: Mapping[str, float], ctx: Context) -> dict[str, np.ndarray]:
-        """Each term's regressor columns at ``p``, by linear parameter."""
+    def columns(self, p: Mapping[str, float], ctx: Context,
+                terms: Sequence[Term] | None = None) -> dict[str, np.ndarray]:
+        """The regressor columns at ``p`` of every term (or of ``terms`` alone: ML's
+        score moves only those a parameter changes), by linear parameter, the context
+        bound to the model's modifiers."""
         cols: dict[str, np.ndarray] = {}
         ctx = ctx.bound(self.modifiers)
-        for t in self.terms:
+        for t in self.terms if terms is None else terms:
             cols.update(t.regressors(p, ctx))
         return cols
 
@@ -188,7 +191,7 @@ class Model:
         """``[y, X(p)]`` (N, 1 + n_linear), the Kalman filter's input: :meth:`regressors`
         written into it column by column (one copy of them, not a matrix and then its
         copy: ML's every new point of the search)."""
-        cols = self._columns(p, ctx)
+        cols = self.columns(p, ctx)
         lin = self.names_of_kind("linear")
         Y = np.empty((ctx.t.size, 1 + len(lin)))
         Y[:, 0] = y

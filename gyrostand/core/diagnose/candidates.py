@@ -59,6 +59,7 @@ from ..data import Samples
 from ..ml.cov import FLAT_WARNING
 from ..ml.fit import ml
 from ..ml.joint_problem import base_name
+from ..ml.search import bound_warning
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
@@ -133,13 +134,13 @@ def refit(samples: Samples, model: Model, base: FitResult | None,
         # walk run, seed 511: LR 0; the walk's optimum, β 0.0106, q 0.0021, the truth
         # 0.01, 0.002: LR 6.46). So its profile likelihood at two levels too — the level
         # held, every other parameter refitted — and where the better beats the refit, a
-        # free fit from there. Measured on 80 4-h runs (a walk, a lag + a walk, clean):
-        # the same optimum as a search from ML's whole start grid on 77, a higher one on
-        # 3 (511 as the grid, 506 LR 3.86 and 507 LR 3.24 where the grid found 0), at
-        # three quarters of its CPU
+        # free fit from there. Measured on 80 4-h runs (a walk, a lag + a walk with and
+        # without temp_lag in the model, clean, warm-up + T²) against a search from ML's
+        # whole start grid: the same optimum on 78 (511's walk among them), a higher one
+        # on 2 (506 LR 3.86 and 507 LR 3.24 where the grid found 0), at 0.62 of its CPU
         best = r
+        level = _level_scale(model, start)
         for n in new_levels:
-            level = _level_scale(model, start)
             for ratio in PROFILE_LEVELS:
                 try:
                     g = ml(samples, model, fixed={n: ratio * level}, start=start,
@@ -194,8 +195,7 @@ def _physical_at_bound(model: Model, r: FitResult, name: str) -> bool:
     lag of a few Δt: none measurable; :class:`~gyrostand.core.terms.base.Param`'s
     ``physical_bounds``)."""
     q = dict(model.params)[base_name(name)]  # a run's own copy (name@k): its term's
-    return any(f"ml: {name} is at its {side} search bound" in w
-               for side in q.physical_bounds for w in r.warnings)
+    return any(bound_warning(name, side) in w for side in q.physical_bounds for w in r.warnings)
 
 
 def identification(model: Model, r: FitResult, new: list[str]) -> tuple[bool, tuple[str, ...]]:

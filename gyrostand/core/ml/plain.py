@@ -9,6 +9,7 @@ from typing import TypeVar
 from ...errors import IdentificationError
 from ..model import Model
 from ..results import FitResult
+from .search import bound_warning
 
 F = TypeVar("F")
 
@@ -33,8 +34,7 @@ def plain_shapes(res: FitResult, finish: F, model: Model, fixed: Mapping[str, fl
     for name in res.info.get("at_bound", ()):
         if name not in defaults or name in held or res.loglik is None:
             continue
-        if not any(w.startswith(f"ml: {name} is at its lower search bound")
-                   for w in res.warnings):
+        if not any(w.startswith(bound_warning(name, "lower")) for w in res.warnings):
             # at its upper bound (a hysteresis width: a tanh nearly linear in the rate)
             # the default lies inside the range the search had: measured, 5 of 5 such
             # refits lost (by up to 21 in ln L), each a local search of 0.1 s

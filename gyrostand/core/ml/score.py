@@ -73,6 +73,8 @@ def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
     dphi, dq, dp0 = np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, n))
     dr = np.zeros(d)
     du = np.zeros((d, u.size))
+    coef = {key: c[1 + i] for i, key in enumerate(prob.linear)}  # u's weight of each column
+    ctx = prob.ctx.bound(model.modifiers)
     for j, name in enumerate(prob.znames):
         up, dn = dict(p), dict(p)
         up[name] = float(np.exp(z[j] + STEP))
@@ -85,7 +87,6 @@ def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
         if name in prob.x_names and Y.shape[1] > 1:
             # a term's own slopes where it gives them (Term.regressor_slopes), else
             # central differences of its regressors
-            ctx = prob.ctx.bound(model.modifiers)
             differenced = []
             for t in _moved_by(prob, name, p):
                 slopes = t.regressor_slopes(p, ctx, name)
@@ -93,14 +94,15 @@ def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
                     differenced.append(t)
                     continue
                 for key, sl in slopes.items():
-                    if key in prob.linear:
-                        du[j] += sl * c[1 + prob.linear.index(key)]
+                    if key in coef:
+                        du[j] += sl * coef[key]
             if differenced:
-                ca, cb = _columns(prob, differenced, up), _columns(prob, differenced, dn)
+                ca = model.columns(up, prob.ctx, differenced)
+                cb = model.columns(dn, prob.ctx, differenced)
                 moved = np.zeros(u.size)
                 for key, xa in ca.items():
-                    if key in prob.linear:
-                        moved += (xa - cb[key]) * c[1 + prob.linear.index(key)]
+                    if key in coef:
+                        moved += (xa - cb[key]) * coef[key]
                 du[j] += moved / (2 * STEP)
     # u's NaN (a missing sample) is du's too: the kernel tests u
     ready("score_run")  # a first run: compiled beside this process (..prewarm)
@@ -121,16 +123,6 @@ def score_work(n: int, d: int) -> tuple[np.ndarray, ...]:
     return (np.zeros(n), np.zeros((n, n)), np.zeros((d, n)), np.zeros((d, n, n)),
             np.empty(n), np.empty((d, n)), np.empty(n), np.empty((d, n)), np.empty(d),
             np.zeros(d), np.zeros(d), np.empty((n, n)), np.empty((d, n, n)), np.zeros(1))
-
-
-def _columns(prob: Problem, terms, p) -> dict[str, np.ndarray]:
-    """The regressor columns of ``terms`` alone at ``p`` (as :meth:`Model.regressors`
-    makes them: the context bound to the model's modifiers)."""
-    ctx = prob.ctx.bound(prob.model.modifiers)
-    cols: dict[str, np.ndarray] = {}
-    for t in terms:
-        cols.update(t.regressors(p, ctx))
-    return cols
 
 
 def _moved_by(prob: Problem, name: str, p) -> tuple:

@@ -23,6 +23,12 @@ GTOL = 1e-8
 FTOL = 1e-10
 
 
+def bound_warning(name: str, side: str) -> str:
+    """How the search's warning of a parameter at its ``side`` ("lower"/"upper") search
+    bound begins (the plain shapes and the candidates' table read it)."""
+    return f"ml: {name} is at its {side} search bound"
+
+
 def _newton_gain(res, n: int) -> float:
     """ln L still to gain by a quasi-Newton step from L-BFGS-B's end point (½ g'H⁻¹g · n).
 
@@ -119,7 +125,7 @@ def optimise(prob, starts: list[np.ndarray], n_local: int | None,
                 side = "lower" if v <= z_lo + 1e-3 else "upper"
                 what = ("≈ 0: no measurable contribution" if side == "lower" and
                         prob.kind(name) == "std" else "at the edge of its plausible range")
-                warnings.append(f"ml: {name} is at its {side} search bound ({what})")
+                warnings.append(f"{bound_warning(name, side)} ({what})")
         info = {"iterations": int(best.nit), "converged": converged,
                 "at_bound": list(at_bound)}
     else:

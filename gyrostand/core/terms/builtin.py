@@ -302,21 +302,19 @@ class Hysteresis(Term):
 
     def regressor_slopes(self, p: P, ctx: Context, name: str) -> dict[str, np.ndarray] | None:
         """d tanh(r/w)/d ln w = −(r/w)·sech²(r/w); d/d ln τ = sech²(r/w)·(dr/d ln τ)/w,
-        the lagged rate r's slope by central differences of the lag alone: one tanh a
-        step of ML's search instead of four (0.1 s of a 6-h diagnose's hysteresis refit)."""
+        the lagged rate r's slope by central differences of the lag alone: one tanh for
+        each shape parameter at a step of ML's search, where central differences of the
+        regressor took two each (0.1 s of a 6-h diagnose's hysteresis refit)."""
         tau, w = self.shape(p, "tau"), self.shape(p, "w")
+        if name != self.key("w") and not (name == self.key("tau") and tau > 0):
+            return None
+        x = ctx.lagged_rate(tau) / w
+        t = np.tanh(x)
         if name == self.key("w"):
-            rate = ctx.lagged_rate(tau)
-            x = rate / w
-            t = np.tanh(x)
             return {self.key("h"): -x * (1.0 - t * t)}
-        if name == self.key("tau") and tau > 0:
-            rate = ctx.lagged_rate(tau)
-            t = np.tanh(rate / w)
-            up = ctx.lagged_rate(float(np.exp(np.log(tau) + SLOPE_STEP)))
-            dn = ctx.lagged_rate(float(np.exp(np.log(tau) - SLOPE_STEP)))
-            return {self.key("h"): (1.0 - t * t) * ((up - dn) / (2 * SLOPE_STEP * w))}
-        return None
+        up = ctx.lagged_rate(float(np.exp(np.log(tau) + SLOPE_STEP)))
+        dn = ctx.lagged_rate(float(np.exp(np.log(tau) - SLOPE_STEP)))
+        return {self.key("h"): (1.0 - t * t) * ((up - dn) / (2 * SLOPE_STEP * w))}
 
     def causal_regressors(self, p: P, now: Bin) -> dict[str, float]:
         rate = now.lagged_rate(self.shape(p, "tau"))
