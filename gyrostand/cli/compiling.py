@@ -9,7 +9,7 @@ import time
 from typing import Any
 
 from .. import progress
-from ..core import jit
+from ..core import aot, jit
 
 __all__ = ["CompileClock", "show_compilations"]
 
@@ -67,6 +67,9 @@ class CompileClock:
 
     def line(self) -> str:
         if not self.kernels:
+            if aot.built() is not None:
+                return ("numba: nothing compiled (the kernels were compiled at install, "
+                        "gyrostand.core._kernels)")
             return "numba: every kernel loaded from its cache (nothing compiled)"
         names = ", ".join(self.names[:6]) + (", ..." if len(self.names) > 6 else "")
         return (f"numba: first run: {self.kernels} kernel compilation(s) in "

@@ -4,7 +4,8 @@ Every kernel (:mod:`.kalman`, :mod:`.rts`, :mod:`.lkf.kernel`) is ``njit(cache=T
 without a signature: numba compiles it on its first call, for the argument types of that
 call, and writes the machine code to its cache, so a later process loads it (tens of ms)
 instead of compiling it again (0.2-2 s each). A command compiles only the kernels it
-calls.
+calls. An install compiles them ahead of time (:mod:`.aot`): then nothing here compiles
+unless a kernel's source changed since, or ``GYROSTAND_KERNELS=jit`` asks for numba.
 
 Where the cache lives (issue 25): beside the package (``gyrostand/core/__pycache__``,
 numba's default) when the package's folders are writable, else the user's cache folder

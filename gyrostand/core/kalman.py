@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .aot import kernel
 from .jit import listen, ready
 from .rts import forward_work, joseph_covariance, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
@@ -71,8 +72,9 @@ def kf_run(phi, q, p0, r, rw, Y, store):
     outputs and work arrays, allocated here (:func:`kf_work`)."""
     Y = writable(Y)
     phi = writable(phi)
-    return _kf_run(phi, writable(q), writable(p0), float(r), writable(rw), Y, bool(store),
-                   *kf_work(phi.shape[0], Y.shape[0], Y.shape[1], bool(store)))
+    run = kernel("kf_run", _kf_run, made_here=True)  # compiled at install, else numba's
+    return run(phi, writable(q), writable(p0), float(r), writable(rw), Y, bool(store),
+               *kf_work(phi.shape[0], Y.shape[0], Y.shape[1], bool(store)))
 
 
 def kf_work(n: int, N: int, m: int, store: bool) -> tuple[np.ndarray, ...]:
@@ -258,16 +260,17 @@ def kf_filtered_states(phi, q, p0, r, rw, y):
     """
     ready("rts")  # a first run: compiled beside this process (.prewarm)
     phi, y = writable(phi), writable(y)
-    return rts_forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
-                       *forward_work(phi.shape[0], y.shape[0]))[2]
+    forward = kernel("rts_forward", rts_forward, made_here=True)
+    return forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
+                   *forward_work(phi.shape[0], y.shape[0]))[2]
 
 
 def first_order_response(u, phi, a0, a1, x0):
     """x_0 = x0; x_k = phi x_{k-1} + a0 u_{k-1} + a1 u_k: :func:`_first_order_response`
     on a writable ``u``."""
     u = writable(u)
-    return _first_order_response(u, float(phi), float(a0), float(a1), float(x0),
-                                 np.empty(u.shape[0]))
+    response = kernel("first_order_response", _first_order_response, made_here=True)
+    return response(u, float(phi), float(a0), float(a1), float(x0), np.empty(u.shape[0]))
 
 
 @njit(cache=True, nogil=True)

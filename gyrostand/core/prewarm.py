@@ -32,7 +32,7 @@ import threading
 from collections.abc import Iterable
 from types import ModuleType
 
-from . import jit, rts
+from . import aot, jit, rts
 from .ml import score
 
 __all__ = ["KERNELS", "start"]
@@ -44,7 +44,10 @@ KERNELS: dict[str, ModuleType] = {"score_run": score, "rts": rts}
 
 def _cached(name: str) -> bool:
     """Whether numba's cache holds every dispatcher of kernel ``name`` for this source
-    (its index names a compiled version); unknown: treated as cached."""
+    (its index names a compiled version), or the kernels compiled at install serve them
+    (:mod:`.aot`); unknown: treated as cached."""
+    if aot.built() is not None:
+        return True
     for disp in KERNELS[name].KERNELS:
         if disp.signatures:  # compiled (or loaded) in this process already
             continue

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .aot import kernel
 from .jit import listen, ready
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -95,13 +96,15 @@ def kf_smooth(phi, q, p0, r, rw, y):
     ready("rts")  # a first run: compiled beside this process (.prewarm)
     phi = writable(phi)
     y = writable(y)
-    xp, Pp, xf, Pf = rts_forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
-                                  *forward_work(phi.shape[0], y.shape[0]))
+    forward = kernel("rts_forward", rts_forward, made_here=True)  # at install, else numba
+    xp, Pp, xf, Pf = forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
+                             *forward_work(phi.shape[0], y.shape[0]))
     N = xp.shape[0]
     J = np.empty_like(Pf)
     if N > 1:
         J[:-1] = (Pf[:-1] * phi[np.newaxis, np.newaxis, :]) @ np.linalg.pinv(Pp[1:])
-    return _rts_backward(xp, Pp, xf, Pf, J, *backward_work(phi.shape[0], y.shape[0]))
+    backward = kernel("rts_backward", _rts_backward, made_here=True)
+    return backward(xp, Pp, xf, Pf, J, *backward_work(phi.shape[0], y.shape[0]))
 
 
 def forward_work(n: int, N: int) -> tuple[np.ndarray, ...]:

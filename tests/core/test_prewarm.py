@@ -38,7 +38,9 @@ print(json.dumps({"started": started, "heard": heard,
 
 
 def _run(cache: Path) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    # numba's path: the kernels compiled at install (gyrostand.core.aot) need no child
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT),
+               GYROSTAND_KERNELS="jit")
     out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True,
                          text=True, timeout=300, check=True, cwd=ROOT)
     return json.loads(out.stdout.strip().splitlines()[-1])

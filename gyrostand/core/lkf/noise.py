@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from ..aot import kernel
 from ..kalman import NO_WEIGHTS, kf_run
 from ..terms.base import Context
 from .kernel import gm_profile
@@ -183,7 +184,8 @@ def reestimate(f: RelinLKF, ctx: Context) -> None:
             q["white.sigma"] = math.exp(z)
         ss = f.model.state_space(q, f.dt)
         if single:  # markov + white: the scalar filter
-            g, slogf, nobs = gm_profile(d, ss.phi[0], ss.q[0], ss.r, ss.p0[0])
+            profile = kernel("gm_profile", gm_profile)  # at install, else numba's
+            g, slogf, nobs = profile(d, ss.phi[0], ss.q[0], ss.r, ss.p0[0])
         else:
             G, slogf, nobs = kf_run(ss.phi, ss.q, ss.p0, ss.r, NO_WEIGHTS, D, False)[2:]
             g = float(G[0, 0])

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import ModelError
+from ..aot import kernel
 from ..kalman import foh_weights, kf_step
 from ..model import Model
 from ..terms.base import Bin, Scales, Term
@@ -264,7 +265,8 @@ class OnlineLKF:
                 x = causal[key]
             self.H[i] = x
             z -= self.point[key] * x
-        e, f = kf_step(self.x, self.P, A, self.Qd, self.H, self.r, z)
+        step = kernel("kf_step", kf_step)  # compiled at install, else numba's
+        e, f = step(self.x, self.P, A, self.Qd, self.H, self.r, z)
         return float(e), float(f)
 
     @property

@@ -40,6 +40,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from ...errors import ModelError
+from ..aot import kernel
 from ..kalman import foh_weights
 from ..model import Model
 from ..terms.base import Bin, Context, Scales, Term
@@ -281,10 +282,11 @@ class RelinLKF:
     # ---- filtering ----------------------------------------------------------------------
     def _pass(self, k0: int, k1: int, U: np.ndarray) -> tuple[float, float, int]:
         ni = len(self.inputs)
-        return lkf_pass(self._y, U, self._X, self.point[1: 1 + ni].copy(),
-                        self.point[1 + ni:].copy(), self.phi0, self.a0, self.a1, self.q0,
-                        self.r, self.phix, self.qx, self.feedback, self.x, self.P, self._st,
-                        k0, k1, self._E, self._F)
+        run = kernel("lkf_pass", lkf_pass)  # compiled at install, else numba's
+        return run(self._y, U, self._X, self.point[1: 1 + ni].copy(),
+                   self.point[1 + ni:].copy(), self.phi0, self.a0, self.a1, self.q0,
+                   self.r, self.phix, self.qx, self.feedback, self.x, self.P, self._st,
+                   k0, k1, self._E, self._F)
 
     def update(self, y: float, T: float, regressors: np.ndarray | None = None) -> None:
         """One bin: drift ``y`` (NaN = gap), temperature ``T`` (degC). The first bin must be

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from ..aot import kernel
 from ..jit import listen, ready
 from ..rts import sum_variance, writable
 
@@ -107,9 +108,9 @@ def score_pass(prob: Problem, z: np.ndarray, theta: np.ndarray, s2: float
     # u's NaN (a missing sample) is du's too: the kernel tests u
     ready("score_run")  # a first run: compiled beside this process (..prewarm)
     work = score_work(n, d)
-    g_logf, g_s = _score_run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
-                             writable(prob.weights), writable(u), dphi, dq, dp0, dr, du,
-                             *work)
+    run = kernel("score_run", _score_run, made_here=True)  # compiled at install, else numba's
+    g_logf, g_s = run(writable(ss.phi), writable(ss.q), writable(ss.p0), float(ss.r),
+                      writable(prob.weights), writable(u), dphi, dq, dp0, dr, du, *work)
     return -0.5 * (g_logf + g_s / s2), int(work[-1][0])
 
 
