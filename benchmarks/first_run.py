@@ -9,8 +9,12 @@ noisy machine moves both alike; the median ratio is the figure.
 Anchors: ``diagnose`` of a 6-h run (21,600 samples, a hidden temp_rate) empty <= 1.5x
 warm; ``demo`` (the loop on the virtual bus) empty <= 2x warm.
 
-Run: ``.venv/bin/python benchmarks/first_run.py [--pairs 3] [--tree PATH]`` (``--tree``:
-the checkout whose gyrostand is timed, default this one).
+Since session 28 an install compiles the kernels ahead of time (``gyrostand.core.aot``):
+both runs of a pair then load them from the extension module, and ``--jit`` adds the pairs
+of numba's path (``GYROSTAND_KERNELS=jit``), what an install without a C compiler runs.
+
+Run: ``.venv/bin/python benchmarks/first_run.py [--pairs 3] [--tree PATH] [--jit]``
+(``--tree``: the checkout whose gyrostand is timed, default this one).
 """
 
 from __future__ import annotations
@@ -42,9 +46,13 @@ def six_hour_csv(path: Path) -> None:
                header="t,drift,temp", comments="", fmt="%.9g")
 
 
-def timed(argv: list[str], tree: Path, cache: Path, cwd: Path) -> tuple[float, float]:
-    """Wall and CPU (user + sys of the child) seconds of one run."""
-    env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(cache))
+def timed(argv: list[str], tree: Path, cache: Path, cwd: Path,
+          kernels: str = "") -> tuple[float, float]:
+    """Wall and CPU (user + sys of the child) seconds of one run (``kernels``: the value
+    of ``GYROSTAND_KERNELS``, ``jit`` for numba's path without the kernels compiled at
+    install)."""
+    env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(cache),
+               GYROSTAND_KERNELS=kernels)
     before = os.times()
     t0 = time.perf_counter()
     p = subprocess.run([sys.executable, "-m", "gyrostand", "-q", *argv], env=env, cwd=cwd,
@@ -59,15 +67,16 @@ def timed(argv: list[str], tree: Path, cache: Path, cwd: Path) -> tuple[float, f
     return wall, cpu
 
 
-def pairs(name: str, argv: list[str], tree: Path, work: Path, n: int, anchor: float) -> None:
-    key = name.split()[0]
+def pairs(name: str, argv: list[str], tree: Path, work: Path, n: int, anchor: float,
+          kernels: str = "") -> None:
+    key = name.split()[0] + kernels
     warm = work / f"warm-{key}"
-    timed(argv, tree, warm, work)  # fills the warm cache
+    timed(argv, tree, warm, work, kernels)  # fills the warm cache
     rows = []
     for k in range(n):
         empty = Path(tempfile.mkdtemp(prefix=f"empty-{key}-", dir=work))
-        cold_w, cold_c = timed(argv, tree, empty, work)
-        warm_w, warm_c = timed(argv, tree, warm, work)
+        cold_w, cold_c = timed(argv, tree, empty, work, kernels)
+        warm_w, warm_c = timed(argv, tree, warm, work, kernels)
         rows.append((cold_w, warm_w, cold_c, warm_c))
         print(f"  pair {k + 1}: empty cache {cold_w:6.1f} s wall ({cold_c:5.1f} s CPU), "
               f"warm {warm_w:6.1f} s wall ({warm_c:5.1f} s CPU): {cold_w / warm_w:.2f}x",
@@ -85,7 +94,18 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--tree", type=Path, default=ROOT)
     ap.add_argument("--only", choices=("diagnose", "demo"), default=None)
+    ap.add_argument("--jit", action="store_true",
+                    help="also numba's path (GYROSTAND_KERNELS=jit): an install without "
+                         "the kernels compiled ahead of time (no C compiler)")
     a = ap.parse_args()
+    sys.path.insert(0, str(a.tree))
+    try:
+        from gyrostand.core import aot
+
+        built = "yes" if aot.built() is not None else "no"
+    except ImportError:  # a tree from before them
+        built = "no (this tree has none)"
+    print(f"kernels compiled at install (gyrostand.core._kernels): {built}")
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     print(f"first run vs warm, {a.pairs} pairs each, tree {a.tree}; load average {load}")
     with tempfile.TemporaryDirectory(prefix="first_run-") as tmp:
@@ -95,8 +115,15 @@ def main() -> None:
             six_hour_csv(csv)
             pairs("diagnose (6-h run)", ["diagnose", str(csv), "--unit", "deg/h"], a.tree,
                   work, a.pairs, 1.5)
+            if a.jit:
+                pairs("diagnose (6-h run), numba's path", ["diagnose", str(csv), "--unit",
+                                                          "deg/h"], a.tree, work, a.pairs,
+                      1.5, "jit")
         if a.only in (None, "demo"):
             pairs("demo", ["demo", "--out", str(work / "demo")], a.tree, work, a.pairs, 2.0)
+            if a.jit:
+                pairs("demo, numba's path", ["demo", "--out", str(work / "demo-jit")], a.tree,
+                      work, a.pairs, 2.0, "jit")
 
 
 if __name__ == "__main__":

@@ -80,13 +80,15 @@ def allan_deviation(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
 def segments(ctx: Context) -> list[dict[str, Any]]:
     """Heating / cooling / soak segments from the temperature rate (index ranges)."""
     rate = ctx.temp_rate
-    label = np.where(rate > SOAK_RATE, "heating", np.where(rate < -SOAK_RATE, "cooling", "soak"))
-    out: list[dict[str, Any]] = []
-    start = 0
-    for k in range(1, label.size + 1):
-        if k == label.size or label[k] != label[start]:
-            out.append({"kind": str(label[start]), "start": start, "stop": k})
-            start = k
+    # 1 heating, -1 cooling, 0 soak (a NaN rate too); a segment is a run of one code
+    code = np.where(rate > SOAK_RATE, 1, np.where(rate < -SOAK_RATE, -1, 0))
+    if code.size == 0:
+        return []
+    cut = (np.flatnonzero(code[1:] != code[:-1]) + 1).tolist()
+    kind = {1: "heating", -1: "cooling", 0: "soak"}
+    out: list[dict[str, Any]] = [
+        {"kind": kind[int(code[a])], "start": a, "stop": b}
+        for a, b in zip([0, *cut], [*cut, int(code.size)], strict=True)]
     # merge segments shorter than MIN_SEGMENT_S into their predecessor
     min_n = max(1, int(MIN_SEGMENT_S / ctx.dt))
     merged: list[dict[str, Any]] = []
