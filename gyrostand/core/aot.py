@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import logging
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -101,6 +102,11 @@ def built() -> Any:
                 found = importlib.import_module(MODULE)
                 if int(found.source_key()) == source_key():
                     mod = found
+                else:
+                    logging.getLogger(__name__).info(
+                        "the kernels compiled at install (%s) are older than their source: "
+                        "numba compiles them instead (pip install -e . builds them again)",
+                        found.__file__)
             except (ImportError, AttributeError, OSError):
                 mod = None
         _state["module"] = mod

@@ -110,6 +110,24 @@ def test_the_online_step_gives_numbas_numbers_to_the_bit(ext):
                                                                          states[1][2])
 
 
+def test_every_kernel_called_from_python_is_compiled_at_install():
+    """A kernel added later and left out of SPECS would compile on every first run again:
+    each numba dispatcher of the kernel modules is in SPECS, inlined into them, or a
+    callee of one (compiled into it)."""
+    from numba.core.registry import CPUDispatcher
+
+    from gyrostand.core.lkf import kernel as lkf_kernel
+
+    callees = {"_gram_block"}  # kf_run's block product
+    exported = {attr for _, attr, _, _ in aot.SPECS.values()}
+    for mod in (kalman, rts, score, lkf_kernel):
+        for name, obj in vars(mod).items():
+            if not isinstance(obj, CPUDispatcher) or obj.py_func.__module__ != mod.__name__:
+                continue
+            inlined = obj.targetoptions.get("inline") == "always"
+            assert inlined or name in exported or name in callees, (mod.__name__, name)
+
+
 def test_an_edited_kernel_or_a_request_goes_to_numba(monkeypatch, ext):
     key = aot.source_key()
     monkeypatch.setattr(aot, "_state", {})
