@@ -54,7 +54,7 @@ SPECS: dict[str, tuple[str, str, str, tuple[str, ...]]] = {
     "rts_forward": ("gyrostand.core.rts", "rts_forward",
                     f"Tuple(({_A2}, {_A3}, {_A2}, {_A3}))", (
                         _A1, _A1, _A1, "f8", _A1, _A1,
-                        _A2, _A3, _A2, _A3, _A1, _A2, _A1, _A1, _A2, _A1, _A1)),
+                        _A2, _A3, _A2, _A3, _A1, _A2, _A1, _A1, _A2, _A1, _A1, _A2)),
     "rts_backward": ("gyrostand.core.rts", "_rts_backward", f"UniTuple({_A1}, 2)", (
         _A2, _A3, _A2, _A3, _A3, _A1, _A1, _A1, _A2, _A1, _A2, _A2)),
     "score_run": ("gyrostand.core.ml.score", "_score_run", f"UniTuple({_A1}, 2)", (

@@ -262,7 +262,7 @@ def kf_filtered_states(phi, q, p0, r, rw, y):
     phi, y = writable(phi), writable(y)
     forward = kernel("rts_forward", rts_forward, made_here=True)
     return forward(phi, writable(q), writable(p0), float(r), writable(rw), y,
-                   *forward_work(phi.shape[0], y.shape[0]))[2]
+                   *forward_work(phi.shape[0], y.shape[0], covariances=False))[2]
 
 
 def first_order_response(u, phi, a0, a1, x0):

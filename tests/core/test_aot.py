@@ -70,6 +70,9 @@ def test_the_smoother_score_and_response_give_numbas_numbers_to_the_bit(ext):
     f2 = rts.rts_forward(phi, q, p0, r, rw, y, *rts.forward_work(2, y.size))
     for a, b in zip(f1, f2, strict=True):
         assert np.array_equal(a, b)
+    alone = [run(phi, q, p0, r, rw, y, *rts.forward_work(2, y.size, covariances=False))
+             for run in (ext.rts_forward, rts.rts_forward)]  # the states alone, held P
+    assert np.array_equal(alone[0][2], alone[1][2]) and np.array_equal(alone[0][2], f1[2])
     xp, Pp, xf, Pf = f1
     J = np.empty_like(Pf)
     J[:-1] = (Pf[:-1] * phi[np.newaxis, np.newaxis, :]) @ np.linalg.pinv(Pp[1:])
