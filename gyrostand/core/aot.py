@@ -96,6 +96,7 @@ def built() -> Any:
     """The extension module when it is there, matches this source and is not turned off
     (``GYROSTAND_KERNELS=jit``); else None. Looked up once a process."""
     if "module" not in _state:
+        _state["check_all"] = os.environ.get("GYROSTAND_KERNELS", "").lower() == "checked"
         mod = None
         if os.environ.get("GYROSTAND_KERNELS", "").lower() != "jit":
             try:
@@ -123,19 +124,23 @@ def kernel(name: str, dispatcher: Callable[..., Any], *, made_here: bool = False
     """The function to call for kernel ``name`` (:data:`SPECS`): the extension's, else
     numba's ``dispatcher``.
 
-    The extension's wrapper trusts its arguments' types (an array of another layout or
-    type is read as if it were of its own: wrong memory, a crash). ``made_here``: the
-    caller has just made every array argument itself, of the right type by
-    construction (:func:`~.rts.writable` and the kernel's ``*_work`` allocator, in the
-    lines above the call): the extension's function is returned as it is. Otherwise
-    each array argument is checked first (a C-contiguous, writable float64 array of the rank of
-    :data:`SPECS`); a call
-    that fails the check goes to the dispatcher and is counted in :data:`FALLBACKS`
-    (``carray``: C-contiguous, aligned, writable)."""
+    The extension's wrapper trusts its arguments' types: an array of another layout or
+    type is read as if it were of its own (wrong memory, a crash). So each array argument
+    is checked first (``carray``: a C-contiguous, aligned, writable float64 array of the
+    rank of :data:`SPECS`), and a call that fails the check goes to the dispatcher and is
+    counted in :data:`FALLBACKS`.
+
+    ``made_here``: the caller made every array argument itself, of these types by
+    construction (:func:`~.rts.writable` and the kernel's ``*_work`` allocator in the lines
+    above the call; the LKF's arrays, allocated by its own object), and the call is too
+    short for the check (the LKF's pass is called once a bin: 10 µs, of which the check
+    of its 12 arrays would be 1.7): the extension's function as it is.
+    ``GYROSTAND_KERNELS=checked`` checks these calls too (the tests' way of holding the
+    callers to that claim)."""
     mod = built()
     if mod is None:
         return dispatcher
-    if made_here:
+    if made_here and not _state.get("check_all"):
         return getattr(mod, name)  # type: ignore[no-any-return]
     call = _wrapped.get(name)
     if call is None:

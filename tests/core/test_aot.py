@@ -211,14 +211,21 @@ def test_the_extension_was_built_for_the_types_the_callers_pass(ext, numba_only)
 
 
 def test_a_diagnosis_and_the_lkf_run_on_the_extension_without_a_fallback(ext, monkeypatch):
+    """Every call checked (GYROSTAND_KERNELS=checked), those whose callers say they made
+    their arrays themselves too: a diagnosis, the LKF over a record, the daemon's online
+    LKF (its pass once a bin) and the one-bin filter pass every check."""
+    from gyrostand.config import LkfConfig
     from gyrostand.core import identify
     from gyrostand.core.diagnose.verdict import diagnose
     from gyrostand.core.lkf.filter import OnlineLKF
     from gyrostand.core.model import Model
     from gyrostand.core.profiles import chamber_profile
     from gyrostand.core.simulation import simulate
+    from gyrostand.session.online import LkfTrack
 
     monkeypatch.setattr(aot, "FALLBACKS", {})
+    monkeypatch.setitem(aot._state, "check_all", True)
+    monkeypatch.setattr(aot, "_wrapped", {})
     m = Model.parse("markov,temp,bias")
     s = simulate(Model.parse("markov,temp,bias,temp_rate"),
                  {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
@@ -231,7 +238,12 @@ def test_a_diagnosis_and_the_lkf_run_on_the_extension_without_a_fallback(ext, mo
     online = OnlineLKF(m, s.dt, held={"markov.sigma": 0.05, "white.sigma": 0.02})
     for y, T in zip(s.drift[:200], s.temp[:200], strict=True):
         online.update(float(y), float(T))
+    tracker = LkfTrack(m, LkfConfig(), s.dt)
+    for y, T in zip(s.drift[:1500].tolist(), s.temp[:1500].tolist(), strict=True):
+        tracker.update(y, T)
+    assert np.isfinite(tracker.estimate().values["temp.gamma"][0])
     assert aot.FALLBACKS == {}
+    assert set(aot._wrapped) >= {"kf_run", "lkf_pass", "score_run", "rts_forward"}
 
 
 def test_the_command_gives_the_same_output_on_the_extension_and_on_numba(tmp_path):

@@ -282,7 +282,8 @@ class RelinLKF:
     # ---- filtering ----------------------------------------------------------------------
     def _pass(self, k0: int, k1: int, U: np.ndarray) -> tuple[float, float, int]:
         ni = len(self.inputs)
-        run = kernel("lkf_pass", lkf_pass)  # compiled at install, else numba's
+        # compiled at install, else numba's; every array this object's own (float64, C)
+        run = kernel("lkf_pass", lkf_pass, made_here=True)
         return run(self._y, U, self._X, self.point[1: 1 + ni].copy(),
                    self.point[1 + ni:].copy(), self.phi0, self.a0, self.a1, self.q0,
                    self.r, self.phix, self.qx, self.feedback, self.x, self.P, self._st,
