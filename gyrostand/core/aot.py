@@ -187,6 +187,8 @@ def build(out_dir: Path | str) -> Path:
 
     from numba.core.compiler import Flags
 
+    from .jit import dispatchers
+
     with warnings.catch_warnings():  # pycc's pending deprecation: it still builds
         warnings.simplefilter("ignore")
         from numba.pycc import CC, compiler
@@ -201,6 +203,9 @@ def build(out_dir: Path | str) -> Path:
     cc = CC(MODULE.rsplit(".", 1)[1], __name__)
     cc.output_dir = str(out_dir)
     cc.verbose = False
+    for modname, _, _, _ in SPECS.values():
+        importlib.import_module(modname)
+    dispatchers()  # numba types each kernel's calls of the others through their globals
     for name, (modname, attr, _, _) in SPECS.items():
         cc.export(name, signature(name))(getattr(importlib.import_module(modname),
                                                   attr).py_func)

@@ -7,6 +7,10 @@ instead of compiling it again (0.2-2 s each). A command compiles only the kernel
 calls. An install compiles them ahead of time (:mod:`.aot`): then nothing here compiles
 unless a kernel's source changed since, or ``GYROSTAND_KERNELS=jit`` asks for numba.
 
+The kernels are defined with this module's :func:`njit`: numba's dispatchers are made,
+and numba imported, on first need (:func:`dispatchers`), so a command whose kernels all
+come from the install's extension never imports numba.
+
 Where the cache lives (issue 25): beside the package (``gyrostand/core/__pycache__``,
 numba's default) when the package's folders are writable, else the user's cache folder
 ``$XDG_CACHE_HOME/gyrostand/numba`` (``~/.cache/gyrostand/numba``): :func:`choose_cache_dir`
@@ -29,8 +33,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cache_dir", "choose_cache_dir", "expect", "expecting", "listen", "ready",
-           "user_cache_dir", "watch"]
+__all__ = ["LazyKernel", "cache_dir", "choose_cache_dir", "dispatchers", "expect", "expecting",
+           "listen", "njit", "ready", "user_cache_dir", "watch"]
 
 #: the folders whose kernels numba caches beside their source by default
 KERNEL_DIRS = (Path(__file__).resolve().parent, Path(__file__).resolve().parent / "lkf")
@@ -86,10 +90,13 @@ def _kernel(ev: Any) -> str:
 
 
 def listen() -> None:
-    """Forward numba's compile events to the watchers (once per process; the kernels'
-    modules call it when they load, after numba is imported)."""
+    """Forward numba's compile events to the watchers (once per process). Before numba is
+    imported this only asks for it: :func:`dispatchers` listens when it imports numba
+    (the kernels compiled at install need neither)."""
     if _state["listening"]:
         return
+    if "numba" not in sys.modules:
+        return  # dispatchers() listens when it imports numba
     from numba.core import event
 
     class _Forward(event.Listener):  # type: ignore[misc]
@@ -135,3 +142,82 @@ def ready(name: str) -> None:
     ev = _expected.get(name)
     if ev is not None and not ev.is_set():
         ev.wait(EXPECT_WAIT_S)
+
+
+# ---- kernels whose numba dispatchers are made on first need -------------------------------
+
+#: every kernel defined with :func:`njit`, in definition order
+_lazy: list[LazyKernel] = []
+_made = threading.Lock()
+
+
+class LazyKernel:
+    """A kernel defined with :func:`njit`: its Python function (``py_func``) until numba is
+    needed, then numba's dispatcher, to which calls and attributes (``signatures``,
+    ``targetoptions`` ...) go. A process whose kernels all come from the extension built
+    at install (:mod:`.aot`) never imports numba (0.2-0.3 s of every command's start-up:
+    numba, and the scipy.linalg its BLAS check imports)."""
+
+    def __init__(self, func: Callable[..., Any], options: dict[str, Any]) -> None:
+        self.py_func = func
+        self.options = options
+        self.dispatcher: Any = None
+        self.__name__ = func.__name__
+        self.__qualname__ = func.__qualname__
+        self.__module__ = func.__module__
+        self.__doc__ = func.__doc__
+
+    def __call__(self, *args: Any) -> Any:
+        if self.dispatcher is None:
+            dispatchers()
+        return self.dispatcher(*args)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "dispatcher":  # (before __init__ set it: a copy being made)
+            raise AttributeError(name)
+        if self.dispatcher is None:
+            dispatchers()
+        return getattr(self.dispatcher, name)
+
+    def __repr__(self) -> str:
+        return f"<kernel {self.__module__}.{self.__qualname__} (numba on first need)>"
+
+
+def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+    """numba's ``njit(**options)``, made on first need (:class:`LazyKernel`): the kernel
+    modules' decorator, so that importing them imports no numba."""
+
+    def define(func: Callable[..., Any]) -> Any:
+        kernel = LazyKernel(func, options)
+        with _made:
+            _lazy.append(kernel)
+            if not _state.get("made"):
+                return kernel
+        from numba import njit as numba_njit  # numba in use already: its dispatcher now
+
+        kernel.dispatcher = numba_njit(**options)(func)
+        return kernel.dispatcher
+
+    return define
+
+
+def dispatchers() -> None:
+    """Import numba and make every kernel's dispatcher (once a process). The lazy kernels
+    in gyrostand's modules are replaced by their dispatchers, since numba types a kernel's
+    calls of others through its module's globals."""
+    with _made:
+        if _state.get("made"):
+            return
+        from numba import njit as numba_njit
+
+        for kernel in _lazy:
+            if kernel.dispatcher is None:
+                kernel.dispatcher = numba_njit(**kernel.options)(kernel.py_func)
+        for name, mod in list(sys.modules.items()):
+            if mod is None or not name.startswith("gyrostand."):
+                continue
+            for attr, value in list(vars(mod).items()):
+                if isinstance(value, LazyKernel):
+                    setattr(mod, attr, value.dispatcher)
+        _state["made"] = True
+    listen()

@@ -19,10 +19,9 @@ semi-definite in floating point.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .aot import kernel
-from .jit import listen, ready
+from .jit import listen, njit, ready
 from .rts import forward_work, joseph_covariance, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
 

@@ -11,10 +11,9 @@ these loops about a second.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .aot import kernel
-from .jit import listen, ready
+from .jit import listen, njit, ready
 
 listen()  # a compilation is shown as progress (jit.watch)
 

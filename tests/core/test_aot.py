@@ -119,8 +119,10 @@ def test_every_kernel_called_from_python_is_compiled_at_install():
     callee of one (compiled into it)."""
     from numba.core.registry import CPUDispatcher
 
+    from gyrostand.core import jit
     from gyrostand.core.lkf import kernel as lkf_kernel
 
+    jit.dispatchers()  # the lazy kernels replaced by numba's dispatchers
     callees = {"_gram_block"}  # kf_run's block product
     exported = {attr for _, attr, _, _ in aot.SPECS.values()}
     for mod in (kalman, rts, score, lkf_kernel):
@@ -278,3 +280,26 @@ def _timeless(doc):
     if isinstance(doc, list):
         return [_timeless(v) for v in doc]
     return doc
+
+
+@pytest.mark.parametrize("kernels", ["", "jit"])
+def test_a_command_on_the_extension_imports_no_numba(tmp_path, kernels):
+    """The kernels are numba's only on first need: on the extension a whole diagnose never
+    imports numba (0.2-0.3 s of start-up); on numba's path it does, and compiles."""
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from gyrostand.core.model import Model\n"
+        "from gyrostand.core.profiles import chamber_profile\n"
+        "from gyrostand.core.simulation import simulate\n"
+        "from gyrostand.core.diagnose.verdict import diagnose\n"
+        "m = Model.parse('markov,temp,bias')\n"
+        "s = simulate(m, {'markov.beta': 0.01, 'markov.sigma': 0.05, 'temp.gamma': -5e-4,"
+        " 'white.sigma': 0.02, 'bias.b': 0.3}, chamber_profile(1.0), seed=3)\n"
+        "rep = diagnose(s, m)\n"
+        "print('numba' in sys.modules, rep.fit.loglik)\n")
+    env = dict(os.environ, GYROSTAND_KERNELS=kernels, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True, cwd=ROOT, timeout=600).stdout.split()
+    assert out[0] == ("True" if kernels else "False")
+    assert np.isfinite(float(out[1]))

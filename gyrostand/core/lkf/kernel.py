@@ -21,8 +21,8 @@ with ``var w = q0``, ``var w_i = qx_i``, ``var v = r``; Joseph-form update.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from ..kalman import innovation, joseph_update
 
 

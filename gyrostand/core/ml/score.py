@@ -29,10 +29,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from ..aot import kernel
-from ..jit import listen, ready
+from ..jit import listen, njit, ready
 from ..rts import sum_variance, writable
 
 if TYPE_CHECKING:
