@@ -96,9 +96,10 @@ def built() -> Any:
     """The extension module when it is there, matches this source and is not turned off
     (``GYROSTAND_KERNELS=jit``); else None. Looked up once a process."""
     if "module" not in _state:
-        _state["check_all"] = os.environ.get("GYROSTAND_KERNELS", "").lower() == "checked"
+        asked = os.environ.get("GYROSTAND_KERNELS", "").lower()
+        _state["check_all"] = asked == "checked"
         mod = None
-        if os.environ.get("GYROSTAND_KERNELS", "").lower() != "jit":
+        if asked != "jit":
             try:
                 found = importlib.import_module(MODULE)
                 if int(found.source_key()) == source_key():

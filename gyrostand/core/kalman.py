@@ -22,7 +22,7 @@ import numpy as np
 
 from .aot import kernel
 from .jit import listen, njit, ready
-from .rts import forward_work, joseph_covariance, rts_forward, sum_variance, writable
+from .rts import forward_work, joseph_covariance, repeats, rts_forward, sum_variance, writable
 from .rts import kf_smooth as kf_smooth
 
 listen()  # a compilation is shown as progress (jit.watch)
@@ -164,15 +164,8 @@ def _kf_run(phi, q, p0, r, rw, Y, store,  # pragma: no cover - compiled
                 # K = P H' / f
                 for i in range(n):
                     K[i] = PH[i] / f
-                # (P compared only once f repeats: the cheap test first)
-                same = rk == r_last and f == f_last
-                for i in range(n):
-                    for j in range(n):
-                        if same and P[i, j] != P_last[i, j]:
-                            same = False
-                        P_last[i, j] = P[i, j]
+                steady = repeats(P, P_last, rk == r_last and f == f_last)
                 r_last = rk
-                steady = same
             slogf += logf
             nobs += 1
             # e = y - H x ;  x = x + K e

@@ -48,6 +48,20 @@ def sum_variance(P, PH, rk):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def repeats(P, P_last, same):  # pragma: no cover - compiled
+    """Whether ``P`` repeats ``P_last`` bit for bit, given ``same`` (the cheaper tests, R
+    and f repeated, passed first: P is compared only then); ``P`` copied into ``P_last``.
+    The filters' steady state: once it repeats, so does every following P."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if same and P[i, j] != P_last[i, j]:
+                same = False
+            P_last[i, j] = P[i, j]
+    return same
+
+
+@njit(cache=True, nogil=True, inline="always")
 def joseph_covariance(P, H, K, PH, r, B, BH):  # pragma: no cover - compiled
     """P = (I − K H) P (I − K H)' + K r K' in place, given the gain ``K`` and PH = P H'.
 
@@ -173,15 +187,9 @@ def rts_forward(phi, q, p0, r, rw, y,  # pragma: no cover - compiled
                 if f > 0.0:
                     for i in range(n):
                         K[i] = PH[i] / f
-                if not keep:  # (P compared only once f repeats: the cheap test first)
-                    same = rk == r_last and f == f_last and f > 0.0
-                    for i in range(n):
-                        for j in range(n):
-                            if same and P[i, j] != P_last[i, j]:
-                                same = False
-                            P_last[i, j] = P[i, j]
+                if not keep:
+                    steady = repeats(P, P_last, rk == r_last and f == f_last and f > 0.0)
                     r_last = rk
-                    steady = same
             if f > 0.0:  # (else a degenerate variance: the prediction stands)
                 e = y[k] - hx  # x = x + K (y - H x)
                 for i in range(n):
