@@ -42,10 +42,11 @@ HOURS = 6.0
 
 
 def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
-                 progress: bool = False, lrs: dict[str, list[tuple]] | None = None):
+                 progress: bool = False, lrs: dict[str, list[tuple]] | None = None,
+                 shifts: list[tuple[float, float]] | None = None):
     """(alarms, reasons Counter, seconds per run) over ``n_runs`` clean runs; ``lrs``, when
     given, collects each candidate's (LR, df, p, test) per run (under the null p is
-    uniform: P(p < a) = a)."""
+    uniform: P(p < a) = a); ``shifts`` the level shift's (score, p) per run."""
     alarms = 0
     why: Counter[str] = Counter()
     t0 = time.perf_counter()
@@ -59,6 +60,8 @@ def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
                 for c in rep.candidates:
                     lrs.setdefault(c.term, []).append((c.lr_stat, c.df, c.p_value,
                                                        c.test))
+            if shifts is not None and rep.level_shift is not None:
+                shifts.append((rep.level_shift.stat, rep.level_shift.p_value))
             if not rep.adequate:
                 alarms += 1
                 for r in rep.reasons:
@@ -82,7 +85,8 @@ def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 100
     hours = float(sys.argv[2]) if len(sys.argv) > 2 else HOURS
     lrs: dict[str, list[tuple]] = {}
-    k, why, per = false_alarms(n, hours=hours, progress=True, lrs=lrs)
+    shifts: list[tuple[float, float]] = []
+    k, why, per = false_alarms(n, hours=hours, progress=True, lrs=lrs, shifts=shifts)
     lo, hi = clopper_pearson(k, n)
     print(f"clean runs: {n} ({hours:g}-h chamber cycles from frames), false alarms: {k} = "
           f"{100 * k / n:.1f} % (95 % CI {100 * lo:.1f}–{100 * hi:.1f} %), nominal level of "
@@ -99,6 +103,11 @@ def main() -> None:
         print(f"    {term:<12} mean LR {sum(lr) / len(lr):5.2f}  df {v[0][1]}  "
               f"max {max(lr):6.2f}  p < 0.05: {sum(x < 0.05 for x in p):3d}/{len(p)}  "
               f"p < 0.05/{m}: {sum(x < 0.05 / m for x in p):2d}  ({v[0][3]})")
+    if shifts:
+        print(f"    level shift  max score {max(x[0] for x in shifts):5.1f} (Bonferroni over "
+              f"the break times)  p < 0.05: {sum(x[1] < 0.05 for x in shifts):3d}/"
+              f"{len(shifts)}  p < 0.001 (the verdict's): "
+              f"{sum(x[1] < 0.001 for x in shifts)}")
     print(f"{per:.2f} s per run (diagnose with every candidate)")
 
 

@@ -42,13 +42,20 @@ def run(args: argparse.Namespace) -> int:
     subject = subject_of(args)
     out = new_term(subject, args.name, Path(args.out) if args.out else None, args.force)
     f, q = out.formula, out.partial
-    print(f"missing shape: the partial effect of {q.variable} (Wald {q.wald:.1f} on {q.df} "
-          f"df, p = {q.p_value:.2g}; the model's lack of fit p = {out.lack_of_fit_p:.2g})")
+    if out.shift is not None:
+        print(f"missing shape: a level shift of the drift {out.shift.text(subject.unit)}: "
+              "a step at that instant (a bias jump: look at the run's log there)")
+    else:
+        assert q is not None
+        print(f"missing shape: the partial effect of {q.variable} (Wald {q.wald:.1f} on "
+              f"{q.df} df, p = {q.p_value:.2g}; the model's lack of fit p = "
+              f"{out.lack_of_fit_p:.2g})")
     print(f"formula: a · g({f.variable}), g = "
           + " ".join(f"{c:+.4g}·{n}" for (n, _), c in zip(f.forms, f.coef, strict=True))
           + " (normalised to peak 1); "
           + (f"score LM {f.score:.1f} at the current fit, " if f.score is not None else "")
-          + f"R² {f.r2:.3f} of the reference's curve; a ≈ {f.amplitude:.4g} {subject.unit}"
+          + (f"R² {f.r2:.3f} of the reference's curve; " if out.shift is None else "")
+          + f"a ≈ {f.amplitude:.4g} {subject.unit}"
           + "".join(f"; + b{n.rsplit('^', 1)[1]}·{n} at the output, its own coefficient "
                     f"(≈ {c:.4g} {subject.unit})" for n, _, c in f.lower))
     print(f"wrote {out.module}")

@@ -118,7 +118,11 @@ def verdict(rep: DiagnoseResult, fit_command: str = FIT_RUN, adopt_command: str 
         out.append("<p>The innovations are white and no candidate effect is significant "
                    "after the Bonferroni correction.</p>")
     out += [f'<p class="meta">Note: {e(n)}</p>' for n in rep.notes]
-    if not rep.adequate and rep.significant:
+    if getattr(rep, "jump", False):
+        out.append(f"<p>Next step: <code>{e(_text.term_new_command(fit_command))}</code> "
+                   "(writes a plugin term of the level shift, a step at its instant; review "
+                   "it, pip install it, then fit --add it: README, plugins).</p>")
+    elif not rep.adequate and rep.significant:
         best = rep.significant[0]
         out.append(f"<p>Next step: <code>{e(fit_command)} --add {e(best.term)}</code> "
                    f"(residual RMS {num(rep.diagnosis.rms)} → {num(best.rms_after)}).</p>")

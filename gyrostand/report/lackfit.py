@@ -1,12 +1,14 @@
 """The saturated reference in text: the lack-of-fit test and, where it is significant, the
-shape that is missing (:mod:`gyrostand.core.diagnose.reference`)."""
+shape that is missing (:mod:`gyrostand.core.diagnose.reference`); the level shift judged
+against it (:mod:`gyrostand.core.diagnose.shift`)."""
 
 from __future__ import annotations
 
 from ..core.diagnose.reference import REPORT_ALPHA, Reference
+from ..core.diagnose.shift import LevelShift
 from ..core.diagnose.verdict import lack_of_fit_text
 
-__all__ = ["reference"]
+__all__ = ["level_shift", "reference"]
 
 
 def reference(ref: Reference, unit: str) -> list[str]:
@@ -31,3 +33,11 @@ def reference(ref: Reference, unit: str) -> list[str]:
             lines.append(f"    {q.variable} = {q.x[i]:10.4g} {q.unit:<6} "
                          f"{q.effect[i]:+10.4g} ± {2 * q.std[i]:.3g} {unit}")
     return lines
+
+
+def level_shift(shift: LevelShift, unit: str) -> list[str]:
+    """The largest level shift of the drift against the reference, and whether it is one."""
+    if shift.significant:
+        return [f"level shift: {shift.text(unit)} — SIGNIFICANT (level {shift.alpha:g}): a "
+                "bias jump no smooth shape holds"]
+    return [f"level shift: none (the largest {shift.text(unit)}; level {shift.alpha:g})"]

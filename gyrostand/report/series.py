@@ -305,7 +305,7 @@ def ledger_points(steps: list[dict[str, Any]], report: DiagnoseResult,
     err = getattr(report, "model_error", None)
     push(report.model.names, report.diagnosis.rms, float(report.fit.loglik or np.nan), None,
          err.rms if err is not None else math.nan, err.floor if err is not None else math.nan)
-    if not report.adequate and report.significant:
+    if not report.adequate and report.significant and not getattr(report, "jump", False):
         c = report.significant[0]
         e_c = f_c = math.nan
         if samples is not None and c.result is not None:

@@ -30,10 +30,11 @@ def frame_run(path: Path, terms=(), extra=None, *, seed: int, hours: float = 4.0
               drift_hz: float = 10.0, temp_hz: float = 10.0, drop: float = 0.0,
               jitter: float = 0.002, start_offset: float = 0.93, end_cut: float = 0.05,
               outage: tuple[float, float] | None = None, params=None,
-              profile=None, response=None) -> Path:
+              profile=None, response=None, event=None) -> Path:
     """Write the binned CSV of a frame-level simulation to ``path``; return it.
     ``response(T)``: a static response to the temperature added to the drift (a shape
-    outside the vocabulary)."""
+    outside the vocabulary); ``event(t)``: a function of the time since the start added to
+    it (a bias jump: the frames between the grid's seconds interpolate across it)."""
     p = {**BASE, **(params or {}), **(extra or {})}
     m = Model.parse(["markov", "temp", "bias", *terms])
     prof = profile if profile is not None else chamber_profile(hours)
@@ -41,6 +42,9 @@ def frame_run(path: Path, terms=(), extra=None, *, seed: int, hours: float = 4.0
     if response is not None:
         clean = type(clean).from_arrays(clean.t, clean.drift + response(clean.temp),
                                         clean.temp, dt=clean.dt)
+    if event is not None:
+        clean = type(clean).from_arrays(clean.t, clean.drift + event(clean.t), clean.temp,
+                                        dt=clean.dt)
     rng = np.random.default_rng(seed + 5000)
     t1 = clean.t
     span = t1[-1]

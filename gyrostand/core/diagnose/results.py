@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..model import Model
 from ..results import Estimate, FitResult
@@ -14,6 +14,9 @@ from ..summary import DRIFT_UNIT, unit_text
 from .diagnostics import ResidualDiagnostics
 from .prederror import ModelError
 from .reference import Reference
+
+if TYPE_CHECKING:
+    from .shift import LevelShift
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,8 @@ class DiagnoseResult:
     #: terms of an adequate model that no longer earn their place
     #: (:func:`~.verdict.redundant_terms`): ``fit --remove`` them
     redundant: tuple[dict[str, Any], ...] = ()
+    #: the largest level shift against the reference (:mod:`.shift`; one run only)
+    level_shift: LevelShift | None = field(default=None, compare=False)
 
     @property
     def significant(self) -> list[Candidate]:
@@ -134,12 +139,23 @@ class DiagnoseResult:
         return None
 
     @property
+    def jump(self) -> bool:
+        """Whether a level shift of the drift (a bias jump, :mod:`.shift`) fails the model:
+        the ``term new`` step next, before any candidate (the candidates' LRs are measured
+        with the jump in the data: a trend took LR 34.5 from a jump of 0.15 deg/h)."""
+        return not self.adequate and self.level_shift is not None and \
+            self.level_shift.significant
+
+    @property
     def outside(self) -> bool:
         """Whether the failure is an effect outside the vocabulary, the ``term new`` step
-        next: not adequate, no significant candidate, and the reference's lack of fit
-        significant — at its level, or at :data:`~.reference.REPORT_ALPHA` where another
-        check failed too (as :func:`~.verdict.verdict_reasons` says)."""
+        next: a level shift (:attr:`jump`); or not adequate, no significant candidate, and
+        the reference's lack of fit significant — at its level, or at
+        :data:`~.reference.REPORT_ALPHA` where another check failed too (as
+        :func:`~.verdict.verdict_reasons` says)."""
         ref = self.reference
+        if self.jump:
+            return True
         return not self.adequate and not self.significant and ref is not None and (
             ref.significant or (ref.reported and any(
                 not r.startswith("lack of fit") for r in self.reasons)))
@@ -164,6 +180,7 @@ class DiagnoseResult:
             **({"reference": self.reference.to_dict()} if self.reference else {}),
             "notes": list(self.notes),
             "redundant": [dict(x) for x in self.redundant],
+            **({"level_shift": self.level_shift.to_dict()} if self.level_shift else {}),
         }
 
 

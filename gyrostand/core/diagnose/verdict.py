@@ -9,11 +9,14 @@ model error with the floor drawn from the *reference's* random part. The verdict
 * no candidate is significant at 5 % after a Bonferroni correction for the number tried,
 * the open-loop model error lies at the reference's floor (below its 99 % point), and
 * the lack of fit against the reference is not significant (p ≥
-  :data:`~.reference.LACK_OF_FIT_ALPHA`).
+  :data:`~.reference.LACK_OF_FIT_ALPHA`), and
+* the drift shows no level shift against the reference (a bias jump: p ≥
+  :data:`~.shift.SHIFT_ALPHA`, :mod:`.shift`).
 
 When the lack of fit stays significant and no vocabulary term is, the effect is outside
 the vocabulary: the reasons say which shape the reference finds (its partial effects of
-T, of dT/dt and of time) and that a plugin term of that shape is the next step.
+T, of dT/dt and of time) and that a plugin term of that shape is the next step; so do they
+for a level shift, which no smooth shape holds (the step at its instant).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from .reference import (
     reference_fit,
 )
 from .results import Candidate, DiagnoseResult
+from .shift import LevelShift, level_shift
 from .standin import mark_stand_ins
 
 log = logging.getLogger(__name__)
@@ -90,10 +94,11 @@ def _reference(samples: Samples, fit: FitResult) -> Reference | None:
 
 
 def checks(fit: FitResult, samples: Samples, unit: str, ref: Reference | None
-           ) -> tuple[ResidualDiagnostics, ModelError]:
-    """The residual diagnostics of ``fit`` and its model error with the floor of its
-    reference ``ref``."""
-    return diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref)
+           ) -> tuple[ResidualDiagnostics, ModelError, LevelShift | None]:
+    """The residual diagnostics of ``fit``, its model error with the floor of its
+    reference ``ref``, and the largest level shift against ``ref``."""
+    return (diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref),
+            level_shift(samples, ref))
 
 
 def _also(ref: Reference | None) -> dict[str, float] | None:
@@ -109,9 +114,17 @@ DEGENERATE_MIN, DEGENERATE_LR = 3, 1e-6
 
 
 def verdict_reasons(diag: ResidualDiagnostics, err: ModelError, ref: Reference | None,
-                    sig: list[Candidate], alpha: float, m: int, unit: str) -> list[str]:
+                    sig: list[Candidate], alpha: float, m: int, unit: str,
+                    shift: LevelShift | None = None) -> list[str]:
     """Why the model is not adequate (empty: it is)."""
     reasons = []
+    if shift is not None and shift.significant:
+        reasons.append(
+            f"a level shift of the drift {shift.text(unit)}: no term of the vocabulary has "
+            "this shape — an effect outside the vocabulary (a bias jump: a shock, a power or "
+            "mode change at that time); a plugin step at that instant is the next step "
+            "(README: plugins)" + (", then the candidates judged again (they are measured "
+                                   "with the jump in the data)" if sig else ""))
     if not diag.white:
         reasons.append(f"innovations are not white (Ljung–Box p = {diag.ljung_box_p:.2g} "
                        f"over {diag.lags} lags)")
@@ -235,18 +248,19 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
         cands = order_competitors(samples, model, mark_stand_ins(cands, ref, alpha_each),
                                   alpha_each)
         if early is not None and fit is first:
-            diag, err = early.result()
+            diag, err, shift = early.result()
         else:
-            diag, err = checks(fit, samples, unit, ref)
+            diag, err, shift = checks(fit, samples, unit, ref)
     if len(cands) >= DEGENERATE_MIN and all(c.lr_stat < DEGENERATE_LR for c in cands):
         notes.append("every candidate's LR is 0: the fit sits at a degenerate optimum (each "
                      "refit, started also from the saturated reference's random part, "
                      "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit)
+    reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift)
     return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
                   redundant=tuple(redundant_terms(samples, model, fit, alpha))
                   if not reasons else (),
                   look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
-                  model_error=err, notes=tuple(notes), unit=unit, reference=ref)
+                  model_error=err, notes=tuple(notes), unit=unit, reference=ref,
+                  level_shift=shift)
