@@ -28,8 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gyrostand.core.data import Samples  # noqa: E402
+from gyrostand.core.diagnose.reference import reference_fit  # noqa: E402
 from gyrostand.core.diagnose.shift import level_shift  # noqa: E402
-from gyrostand.core.diagnose.verdict import _reference  # noqa: E402
 from gyrostand.core.ml.fit import ml  # noqa: E402
 from gyrostand.core.model import Model  # noqa: E402
 from tests.workbench.framelike import frame_run  # noqa: E402
@@ -52,7 +52,7 @@ def main() -> None:
                                  hours=HOURS, event=lambda t, a=at, h=size: h * (t > a))
                 s = Samples.read_csv(path)
                 fit = ml(s, m)
-                ref = _reference(s, fit)
+                ref = reference_fit(s, m, fit)
                 c0 = time.process_time()
                 r = level_shift(s, ref)
                 cpu.append(time.process_time() - c0)

@@ -6,24 +6,21 @@ adequate; a shape it is not — a step in T, glitches, a clean run — is not re
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose import shift as sh
+from gyrostand.core.diagnose.reference import reference_fit
 from gyrostand.core.diagnose.shapes import mean_tangents
-from gyrostand.core.diagnose.verdict import _reference, diagnose
+from gyrostand.core.diagnose.verdict import diagnose
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model, context
 from gyrostand.core.validate import prepare
 
 from .framelike import frame_run
+from .plugin_run import fit_and_diagnose
 
 BASE_MODEL = "markov,temp,bias"
 #: the jump: deg/h at s from the start (the 4-h cycle's cold soak)
@@ -39,7 +36,7 @@ def shift_of(path, model=BASE_MODEL):
     s = Samples.read_csv(path)
     m = Model.parse(model)
     fit = ml(s, m)
-    return s, m, fit, _reference(s, fit)
+    return s, m, fit, reference_fit(s, m, fit)
 
 
 @pytest.mark.parametrize("seed", [21, 22])
@@ -126,27 +123,10 @@ def test_term_new_writes_the_step_and_the_model_with_it_is_adequate(tmp_path, ca
     pkg = tmp_path / "gyrostand-jump-a"
     src = (pkg / "gyrostand_jump_a.py").read_text()
     assert "A bias jump: an event of that run" in src
-    script = (
-        "import sys, json, io, contextlib\n"
-        "from gyrostand.plugins import load_modules\n"
-        "load_modules(['gyrostand_jump_a'])\n"
-        "from gyrostand.cli import main\n"
-        f"assert main(['fit', {str(csv)!r}, '--add', 'jump_a', '--format', 'json']) == 0\n"
-        "buf = io.StringIO()\n"
-        "with contextlib.redirect_stdout(buf):\n"
-        f"    assert main(['diagnose', {str(csv)!r}, '--format', 'json', '-q']) == 0\n"
-        "print('DIAGNOSIS' + buf.getvalue())\n")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(pkg), os.environ.get(
-        "PYTHONPATH", "")])}
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                       timeout=600, env=env, cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-3000:]
-    fit_json, diag_json = r.stdout.split("DIAGNOSIS")
-    step = json.loads(fit_json)
+    step, d = fit_and_diagnose(pkg, csv, "jump_a", cwd=tmp_path)
     a = step["parameters"]["jump_a.a"]
     assert step["added"] == ["jump_a"] and step["p_value"] < 1e-6
     assert abs(a["value"] - JUMP) < 3 * a["std"], a
-    d = json.loads(diag_json)
     assert "jump_a" in d["model"]
     assert d["level_shift"]["significant"] is False, d["level_shift"]
     assert d["adequate"] is True, d["reasons"]

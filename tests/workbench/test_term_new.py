@@ -4,11 +4,6 @@ formula, and that term, added with ``fit --add``, makes the model adequate."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -20,6 +15,8 @@ from gyrostand.core.diagnose.reference import Partial
 from gyrostand.core.model import Model
 from gyrostand.core.profiles import chamber_profile
 from gyrostand.core.simulation import simulate
+
+from .plugin_run import fit_and_diagnose
 
 BASE = {"markov.beta": 0.01, "markov.sigma": 0.05, "temp.gamma": -0.0005,
         "white.sigma": 0.02, "bias.b": 0.3}
@@ -68,23 +65,7 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
 
     # the generated module, registered as the session file's plugins: would, then the
     # real command line: fit --add the term, diagnose the bigger model
-    script = (
-        "import sys, json, io, contextlib\n"
-        "from gyrostand.plugins import load_modules\n"
-        "load_modules(['gyrostand_cubic_t'])\n"
-        "from gyrostand.cli import main\n"
-        f"assert main(['fit', {str(csv)!r}, '--add', 'cubic_t', '--format', 'json']) == 0\n"
-        "buf = io.StringIO()\n"
-        "with contextlib.redirect_stdout(buf):\n"
-        f"    assert main(['diagnose', {str(csv)!r}, '--format', 'json', '-q']) == 0\n"
-        "print('DIAGNOSIS' + buf.getvalue())\n")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(pkg), os.environ.get(
-        "PYTHONPATH", "")])}
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                       timeout=600, env=env)
-    assert r.returncode == 0, r.stderr[-3000:]
-    fit_json, diag_json = r.stdout.split("DIAGNOSIS")
-    step = json.loads(fit_json)
+    step, d = fit_and_diagnose(pkg, csv, "cubic_t")
     assert step["added"] == ["cubic_t"] and step["p_value"] < 1e-6
     a = step["parameters"]["cubic_t.a"]
     assert abs(a["value"]) > 4 * a["std"]
@@ -95,7 +76,6 @@ def test_term_new_writes_a_plugin_that_makes_the_model_adequate(tmp_path, capsys
     assert abs(a["value"]) == pytest.approx(0.2162, rel=0.1), a
     assert b2["value"] == pytest.approx(-0.2772, rel=0.1), b2
     assert abs(b1["value"] - 0.1185) < 3 * b1["std"], b1
-    d = json.loads(diag_json)
     assert "cubic_t" in d["model"]
     assert d["reference"]["significant"] is False, d["reference"]["p_value"]
     assert d["adequate"] is True, d["reasons"]
