@@ -34,7 +34,9 @@ the shape shown must then make the run ADEQUATE). A second shape outside the
 vocabulary, a step of 0.4 deg/h above 40 °C (:data:`STEP`), is judged as the
 cubic is (temp2 may be added on the way; the plugin's form is the library's smooth step).
 A third, a jump of the drift at one instant (:data:`JUMP`), likewise: the level shift named
-first, then ADEQUATE with the plugin step ``term new`` writes at its instant.
+first, then ADEQUATE with the plugin step ``term new`` writes at its instant; and a fourth, a
+periodic disturbance (:data:`CYCLING`): the line named, then ADEQUATE with the sine and
+cosine ``term new`` writes at its period.
 """
 
 from __future__ import annotations
@@ -72,6 +74,7 @@ KINDS.update({
     "cubic in T, weak": ([], {}),
     "step above 40 °C (outside)": ([], {}),
     "bias jump (outside)": ([], {}),
+    "chamber cycling (outside)": ([], {}),
 })
 #: the hidden cubic's amplitude, a·(T − 32 °C)³ in deg/h per °C³ (benchmarks/reference_fit
 #: adds 2e-5): on the 4-h cycle (T 10-45 °C) the part no linear + quadratic term holds has
@@ -87,6 +90,11 @@ STEP = {"step above 40 °C (outside)": 0.4}
 #: second run, seed 600+) has none. At 0.15 deg/h the workbench proposed trend and then said
 #: ADEQUATE before the level shift test (:mod:`gyrostand.core.diagnose.shift`)
 JUMP = {"bias jump (outside)": (0.15, 9000.0)}
+#: a periodic disturbance of the drift (deg/h, period s): a chamber's compressor cycling,
+#: its phase each run's own. At 0.05 deg/h every 15 min diagnose said NOT ADEQUATE (the
+#: open-loop error just above its floor) with no next step before the periodic test
+#: (:mod:`gyrostand.core.diagnose.periodic`)
+CYCLING = {"chamber cycling (outside)": (0.05, 900.0)}
 #: terms a sequence may add on a shape outside the vocabulary, a function of T: temp2, the
 #: cubic's quadratic part (and what a step of 0.15 deg/h at 40 °C shares with T²)
 CUBIC_PARTS = {"temp2"}
@@ -105,8 +113,8 @@ def data(kind: str, seed: int, tmp: Path) -> Samples:
     HIDDEN_SAVED = dict(HIDDEN)
     HIDDEN[kind] = KINDS[kind]
     try:
-        s = run("clean" if kind in CUBIC or kind in STEP or kind in JUMP else kind, seed,
-                4.0, tmp)
+        s = run("clean" if kind in CUBIC or kind in STEP or kind in JUMP or kind in CYCLING
+                else kind, seed, 4.0, tmp)
     finally:
         HIDDEN.clear()
         HIDDEN.update(HIDDEN_SAVED)
@@ -118,6 +126,9 @@ def data(kind: str, seed: int, tmp: Path) -> Samples:
         drift += STEP[kind] * (s.temp > 40.0)
     if kind in JUMP and seed < 600:
         drift += JUMP[kind][0] * (s.t > JUMP[kind][1])
+    if kind in CYCLING:
+        amp, period = CYCLING[kind]
+        drift += amp * np.sin(2 * np.pi * s.t / period + rng.uniform(0, 2 * np.pi))
     drift[rng.random(len(s)) < 0.01] = np.nan
     # the first and last bins hold half the frames: their mean is noisier
     drift[[0, -1]] += 0.02 * rng.standard_normal(2)
@@ -148,7 +159,7 @@ def sequence(s: Samples, model: Model | None = None, added: list[str] | None = N
             added.remove(gone)
             model = model.remove(gone)
             continue
-        if rep.adequate or not rep.significant or rep.jump:  # a jump: term new next
+        if rep.adequate or not rep.significant or rep.jump or rep.cycling:  # term new next
             return added, rep.adequate, list(rep.reasons), errors
         if second is not None and rep.tie:
             added, adequate, reasons = joint_steps([s, second()], model, added)

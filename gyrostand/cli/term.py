@@ -45,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     if out.shift is not None:
         print(f"missing shape: a level shift of the drift {out.shift.text(subject.unit)}: "
               "a step at that instant (a bias jump: look at the run's log there)")
+    elif out.cycle is not None:
+        print(f"missing shape: a periodic disturbance {out.cycle.text(subject.unit)}: a sine "
+              "and a cosine at that period, each its own coefficient (what runs at it?)")
     else:
         assert q is not None
         print(f"missing shape: the partial effect of {q.variable} (Wald {q.wald:.1f} on "
@@ -54,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
           + " ".join(f"{c:+.4g}·{n}" for (n, _), c in zip(f.forms, f.coef, strict=True))
           + " (normalised to peak 1); "
           + (f"score LM {f.score:.1f} at the current fit, " if f.score is not None else "")
-          + (f"R² {f.r2:.3f} of the reference's curve; " if out.shift is None else "")
+          + (f"R² {f.r2:.3f} of the reference's curve; "
+             if out.shift is None and out.cycle is None else "")
           + f"a ≈ {f.amplitude:.4g} {subject.unit}"
           + "".join(f"; + b{n.rsplit('^', 1)[1]}·{n} at the output, its own coefficient "
                     f"(≈ {c:.4g} {subject.unit})" for n, _, c in f.lower))

@@ -118,10 +118,12 @@ def verdict(rep: DiagnoseResult, fit_command: str = FIT_RUN, adopt_command: str 
         out.append("<p>The innovations are white and no candidate effect is significant "
                    "after the Bonferroni correction.</p>")
     out += [f'<p class="meta">Note: {e(n)}</p>' for n in rep.notes]
-    if getattr(rep, "jump", False):
+    if getattr(rep, "jump", False) or getattr(rep, "cycling", False):
+        what = ("the level shift, a step at its instant" if rep.jump else
+                "the periodic disturbance, a sine and a cosine at its period")
         out.append(f"<p>Next step: <code>{e(_text.term_new_command(fit_command))}</code> "
-                   "(writes a plugin term of the level shift, a step at its instant; review "
-                   "it, pip install it, then fit --add it: README, plugins).</p>")
+                   f"(writes a plugin term of {what}; review it, pip install it, then fit "
+                   "--add it: README, plugins).</p>")
     elif not rep.adequate and rep.significant:
         best = rep.significant[0]
         out.append(f"<p>Next step: <code>{e(fit_command)} --add {e(best.term)}</code> "

@@ -1,14 +1,16 @@
 """The saturated reference in text: the lack-of-fit test and, where it is significant, the
-shape that is missing (:mod:`gyrostand.core.diagnose.reference`); the level shift judged
-against it (:mod:`gyrostand.core.diagnose.shift`)."""
+shape that is missing (:mod:`gyrostand.core.diagnose.reference`); the level shift and the
+periodic line judged against it (:mod:`gyrostand.core.diagnose.shift`,
+:mod:`gyrostand.core.diagnose.periodic`)."""
 
 from __future__ import annotations
 
+from ..core.diagnose.periodic import Periodic
 from ..core.diagnose.reference import REPORT_ALPHA, Reference
 from ..core.diagnose.shift import LevelShift
 from ..core.diagnose.verdict import lack_of_fit_text
 
-__all__ = ["level_shift", "reference"]
+__all__ = ["level_shift", "periodic", "reference"]
 
 
 def reference(ref: Reference, unit: str) -> list[str]:
@@ -41,3 +43,12 @@ def level_shift(shift: LevelShift, unit: str) -> list[str]:
         return [f"level shift: {shift.text(unit)} — SIGNIFICANT (level {shift.alpha:g}): a "
                 "bias jump no smooth shape holds"]
     return [f"level shift: none (the largest {shift.text(unit)}; level {shift.alpha:g})"]
+
+
+def periodic(cycle: Periodic, unit: str) -> list[str]:
+    """The innovations' strongest periodic line against the reference, and whether it is
+    one."""
+    if cycle.significant:
+        return [f"periodic: {cycle.text(unit)} — SIGNIFICANT (level {cycle.alpha:g}): a "
+                "disturbance at that period"]
+    return [f"periodic: none (the strongest line {cycle.text(unit)}; level {cycle.alpha:g})"]

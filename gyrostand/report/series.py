@@ -305,7 +305,8 @@ def ledger_points(steps: list[dict[str, Any]], report: DiagnoseResult,
     err = getattr(report, "model_error", None)
     push(report.model.names, report.diagnosis.rms, float(report.fit.loglik or np.nan), None,
          err.rms if err is not None else math.nan, err.floor if err is not None else math.nan)
-    if not report.adequate and report.significant and not getattr(report, "jump", False):
+    if not report.adequate and report.significant and not (
+            getattr(report, "jump", False) or getattr(report, "cycling", False)):
         c = report.significant[0]
         e_c = f_c = math.nan
         if samples is not None and c.result is not None:

@@ -16,7 +16,7 @@ from ..core.results import FitResult
 from ..core.summary import fit_table, shown_warnings, unit_text
 from . import ByKind
 from .allan_text import allan
-from .lackfit import level_shift, reference
+from .lackfit import level_shift, periodic, reference
 from .segments import number, open_loop_by_segment
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
 
@@ -67,6 +67,8 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         lines += reference(rep.reference, u)
     if rep.level_shift is not None:
         lines += level_shift(rep.level_shift, u)
+    if rep.periodic is not None:
+        lines += periodic(rep.periodic, u)
     lines.append("")
     lines.append("parameters (ML)")
     for k, e in rep.fit.parameters.items():
@@ -117,7 +119,8 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
                      + "); to separate them: "
                      + (f"design the run that does:\n  {la['command']}" if "command" in la
                         else la["advice"]))
-    if rep.candidates and not rep.adequate and rep.significant and not rep.jump:
+    if rep.candidates and not rep.adequate and rep.significant and not (
+            rep.jump or rep.cycling):
         best = rep.significant[0]
         lines.append("")
         lines.append(f"next: {fit_command} --add {best.term}")
@@ -128,7 +131,8 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         lines.append(f"next: {term_new_command(fit_command)}")
         lines.append("      (writes a plugin term of the "
                      + ("level shift: a step at its instant" if rep.jump
-                        else "shape the reference shows")
+                        else "periodic disturbance: a sine and a cosine at its period"
+                        if rep.cycling else "shape the reference shows")
                      + "; review it, pip install it, then fit --add it: README, plugins)")
     elif rep.adequate and rep.redundant:
         lines.append("")

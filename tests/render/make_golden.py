@@ -13,8 +13,8 @@ noise levels at ~0 moved more — each of them a flat direction), and once more 
 ``diagnose.json`` alone (session 27, #25: the hysteresis term's own regressor slopes in the
 score replace central differences of its tanh, ~1e-10 relative; its candidate's refit stops
 within 1e-8 relative of the same optimum, ln L 4e-11 higher; no other number moved), and for
-``diagnose.txt``/``.json`` (session 29, #23: the level shift's line and key added; no other
-byte changed). Temporary paths
+``diagnose.txt``/``.json`` (session 29, #23: the level shift's and the periodic line's lines
+and keys added; no other byte changed). Temporary paths
 print as ``<TMP>``, a run folder's wall-clock stamp as ``<STAMP>``, this interpreter's
 ``-m gyrostand`` in a printed command as ``gyrostand``, a
 wall-clock duration as ``<S>``; the HTML report's time stamps (its own, the ledger's) as ``<NOW>``.

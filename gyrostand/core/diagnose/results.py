@@ -16,6 +16,7 @@ from .prederror import ModelError
 from .reference import Reference
 
 if TYPE_CHECKING:
+    from .periodic import Periodic
     from .shift import LevelShift
 
 
@@ -123,6 +124,8 @@ class DiagnoseResult:
     redundant: tuple[dict[str, Any], ...] = ()
     #: the largest level shift against the reference (:mod:`.shift`; one run only)
     level_shift: LevelShift | None = field(default=None, compare=False)
+    #: the innovations' strongest periodic line against the reference (:mod:`.periodic`)
+    periodic: Periodic | None = field(default=None, compare=False)
 
     @property
     def significant(self) -> list[Candidate]:
@@ -147,14 +150,21 @@ class DiagnoseResult:
             self.level_shift.significant
 
     @property
+    def cycling(self) -> bool:
+        """Whether a periodic disturbance (:mod:`.periodic`) fails the model: as a
+        :attr:`jump`, the ``term new`` step next, before any candidate."""
+        return not self.adequate and self.periodic is not None and self.periodic.significant
+
+    @property
     def outside(self) -> bool:
         """Whether the failure is an effect outside the vocabulary, the ``term new`` step
-        next: a level shift (:attr:`jump`); or not adequate, no significant candidate, and
+        next: a level shift (:attr:`jump`), a periodic disturbance (:attr:`cycling`); or
+        not adequate, no significant candidate, and
         the reference's lack of fit significant — at its level, or at
         :data:`~.reference.REPORT_ALPHA` where another check failed too (as
         :func:`~.verdict.verdict_reasons` says)."""
         ref = self.reference
-        if self.jump:
+        if self.jump or self.cycling:
             return True
         return not self.adequate and not self.significant and ref is not None and (
             ref.significant or (ref.reported and any(
@@ -181,6 +191,7 @@ class DiagnoseResult:
             "notes": list(self.notes),
             "redundant": [dict(x) for x in self.redundant],
             **({"level_shift": self.level_shift.to_dict()} if self.level_shift else {}),
+            **({"periodic": self.periodic.to_dict()} if self.periodic else {}),
         }
 
 

@@ -42,13 +42,13 @@ import numpy as np
 
 from ..chisq import chi2_sf
 from ..data import Samples
-from ..model import context
+from ..model import Model, context
 from ..threads import one_blas_thread
 from ..validate import prepare
 from .reference import Reference
 from .shapes import mean_tangents
 
-__all__ = ["LevelShift", "SHIFT_ALPHA", "level_shift"]
+__all__ = ["LevelShift", "SHIFT_ALPHA", "Whitened", "level_shift", "whitened"]
 
 #: level of the test in the verdict (the lack of fit's)
 SHIFT_ALPHA = 0.001
@@ -96,37 +96,71 @@ class LevelShift:
                 "significant": self.significant}
 
 
-def level_shift(samples: Samples, ref: Reference | None,
-                alpha: float = SHIFT_ALPHA) -> LevelShift | None:
-    """The largest level shift of ``samples``' drift against the reference ``ref`` (None
-    without a reference fit, or too few samples to seek a break)."""
+@dataclass(frozen=True)
+class Whitened:
+    """The reference's innovations, what the level shift and the periodic line are judged
+    by (:func:`whitened`): the samples used, the reference's model and values, the
+    observed rows ``ok``, their 1/√f ``w``, the whitened innovations ``eps`` (observed
+    rows, orthogonal to ``Q``) and ``Q``, an orthonormal basis of the reference's whitened
+    tangents (its coefficients' regressors and its mean's slopes along its rates)."""
+
+    used: Samples
+    model: Model
+    values: dict[str, float]
+    ok: np.ndarray
+    w: np.ndarray
+    eps: np.ndarray
+    Q: np.ndarray
+
+    def filtered(self, Y: np.ndarray) -> np.ndarray:
+        """Columns ``Y[:, 1:]`` through the reference's Kalman filter, whitened, the
+        tangents projected out (observed rows)."""
+        C = self.model.filter_matrix(self.values, self.used, Y)[0][self.ok, 1:] * \
+            self.w[:, None]
+        C -= self.Q @ (self.Q.T @ C)
+        return C
+
+
+def whitened(samples: Samples, ref: Reference | None) -> Whitened | None:
+    """The reference ``ref``'s whitened innovations on ``samples`` (None without its fit)."""
     if ref is None or ref.fit is None:
         return None
     with one_blas_thread():  # small algebra on long columns: see ml.ml
-        return _level_shift(samples, ref, alpha)
+        used = prepare(samples, "reference innovations")
+        model, vals = ref.model, dict(ref.fit.values)
+        names, Tx = mean_tangents(model, vals, context(used, model))
+        n_lin = len(model.names_of_kind("linear"))
+        theta = np.array([vals[n] for n in names[:n_lin]])
+        E, f = model.filter_columns(vals, used, Tx)
+        e = E[:, 0] - E[:, 1:1 + n_lin] @ theta
+        ok = np.isfinite(e) & (f > 0)
+        w = 1.0 / np.sqrt(f[ok])
+        Q = _basis(E[ok, 1:] * w[:, None])
+        eps = e[ok] * w
+        eps -= Q @ (Q.T @ eps)
+    return Whitened(used=used, model=model, values=vals, ok=ok, w=w, eps=eps, Q=Q)
 
 
-def _level_shift(samples: Samples, ref: Reference, alpha: float) -> LevelShift | None:
-    assert ref.fit is not None
-    used = prepare(samples, "level shift")
-    model, vals = ref.model, dict(ref.fit.values)
-    ctx = context(used, model)
-    names, Tx = mean_tangents(model, vals, ctx)
-    n_lin = len(model.names_of_kind("linear"))
-    theta = np.array([vals[n] for n in names[:n_lin]])
-    E, f = model.filter_columns(vals, used, Tx)
-    e = E[:, 0] - E[:, 1:1 + n_lin] @ theta
-    ok = np.isfinite(e) & (f > 0)
+def level_shift(samples: Samples, ref: Reference | None, alpha: float = SHIFT_ALPHA,
+                at: Whitened | None = None) -> LevelShift | None:
+    """The largest level shift of ``samples``' drift against the reference ``ref`` (None
+    without a reference fit, or too few samples to seek a break). ``at``: the reference's
+    innovations, when already made (:func:`whitened`)."""
+    at = at if at is not None else whitened(samples, ref)
+    if at is None:
+        return None
+    with one_blas_thread():
+        return _level_shift(at, alpha)
+
+
+def _level_shift(at: Whitened, alpha: float) -> LevelShift | None:
+    used, ok, eps = at.used, at.ok, at.eps
     obs = np.flatnonzero(ok)
     trim = int(TRIM * obs.size)
     if obs.size - 2 * trim < 2 * (BEFORE + AFTER + WINDOW):
         return None
     lo, hi = int(obs[trim]), int(obs[obs.size - trim - 1])  # admissible t₀: [lo, hi]
     positions = int(np.count_nonzero((obs >= lo) & (obs <= hi)))
-    w = 1.0 / np.sqrt(f[ok])
-    Q = _basis(E[ok, 1:] * w[:, None])
-    eps = e[ok] * w
-    eps -= Q @ (Q.T @ eps)
     # the breaks sought: around the largest innovations inside [lo, hi]
     full = np.zeros(used.t.size)
     full[obs] = np.abs(eps)
@@ -161,8 +195,7 @@ def _level_shift(samples: Samples, ref: Reference, alpha: float) -> LevelShift |
         for j, v in enumerate(levels):
             Y[:, col + 1 + len(pulses) + j] = temp >= v
         col += 1 + len(pulses) + len(levels)
-    A = model.filter_matrix(vals, used, Y)[0][ok, 1:] * w[:, None]
-    QA = Q.T @ A
+    A = at.filtered(Y)
     b = A.T @ eps
     best: tuple[float, int, float, float] | None = None
     instant = 0
@@ -170,8 +203,8 @@ def _level_shift(samples: Samples, ref: Reference, alpha: float) -> LevelShift |
     for first, last, pulses, levels in groups:
         n = 1 + len(pulses) + len(levels)
         g = slice(col, col + n)
-        # the group's Gram matrix beyond the reference's tangents
-        G = A[:, g].T @ A[:, g] - QA[:, g].T @ QA[:, g]
+        # the group's Gram matrix (the reference's tangents projected out)
+        G = A[:, g].T @ A[:, g]
         found = _best_in_group(G, b[g], first, last, len(levels))
         if found is not None and (best is None or found[0] > best[0]):
             best = found

@@ -11,12 +11,14 @@ model error with the floor drawn from the *reference's* random part. The verdict
 * the lack of fit against the reference is not significant (p ≥
   :data:`~.reference.LACK_OF_FIT_ALPHA`), and
 * the drift shows no level shift against the reference (a bias jump: p ≥
-  :data:`~.shift.SHIFT_ALPHA`, :mod:`.shift`).
+  :data:`~.shift.SHIFT_ALPHA`, :mod:`.shift`), and its innovations no periodic line
+  (Fisher's test, p ≥ :data:`~.periodic.PERIODIC_ALPHA`, :mod:`.periodic`).
 
 When the lack of fit stays significant and no vocabulary term is, the effect is outside
 the vocabulary: the reasons say which shape the reference finds (its partial effects of
 T, of dT/dt and of time) and that a plugin term of that shape is the next step; so do they
-for a level shift, which no smooth shape holds (the step at its instant).
+for a level shift, which no smooth shape holds (the step at its instant), and for a
+periodic disturbance (a sine and a cosine at its period).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from .candidates import (
 )
 from .competitors import order_competitors
 from .diagnostics import ResidualDiagnostics, diagnose_fit, segments
+from .periodic import Periodic, periodic
 from .prederror import ModelError, model_error
 from .reference import (
     REPORT_ALPHA,
@@ -53,7 +56,7 @@ from .reference import (
     reference_fit,
 )
 from .results import Candidate, DiagnoseResult
-from .shift import LevelShift, level_shift
+from .shift import LevelShift, level_shift, whitened
 from .standin import mark_stand_ins
 
 log = logging.getLogger(__name__)
@@ -94,11 +97,13 @@ def _reference(samples: Samples, fit: FitResult) -> Reference | None:
 
 
 def checks(fit: FitResult, samples: Samples, unit: str, ref: Reference | None
-           ) -> tuple[ResidualDiagnostics, ModelError, LevelShift | None]:
+           ) -> tuple[ResidualDiagnostics, ModelError, LevelShift | None, Periodic | None]:
     """The residual diagnostics of ``fit``, its model error with the floor of its
-    reference ``ref``, and the largest level shift against ``ref``."""
+    reference ``ref``, and against ``ref`` the largest level shift and the strongest
+    periodic line."""
+    at = whitened(samples, ref)
     return (diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref),
-            level_shift(samples, ref))
+            level_shift(samples, ref, at=at), periodic(samples, ref, at=at))
 
 
 def _also(ref: Reference | None) -> dict[str, float] | None:
@@ -115,9 +120,17 @@ DEGENERATE_MIN, DEGENERATE_LR = 3, 1e-6
 
 def verdict_reasons(diag: ResidualDiagnostics, err: ModelError, ref: Reference | None,
                     sig: list[Candidate], alpha: float, m: int, unit: str,
-                    shift: LevelShift | None = None) -> list[str]:
+                    shift: LevelShift | None = None,
+                    cycle: Periodic | None = None) -> list[str]:
     """Why the model is not adequate (empty: it is)."""
     reasons = []
+    if cycle is not None and cycle.significant:
+        reasons.append(
+            f"a periodic disturbance of the drift {cycle.text(unit)}: no term of the "
+            "vocabulary has this shape — an effect outside the vocabulary (the chamber's "
+            "compressor or fan cycling, a vibration); a plugin sine and cosine at that "
+            "period is the next step (README: plugins)"
+            + (", then the candidates judged again" if sig else ""))
     if shift is not None and shift.significant:
         reasons.append(
             f"a level shift of the drift {shift.text(unit)}: no term of the vocabulary has "
@@ -248,19 +261,19 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
         cands = order_competitors(samples, model, mark_stand_ins(cands, ref, alpha_each),
                                   alpha_each)
         if early is not None and fit is first:
-            diag, err, shift = early.result()
+            diag, err, shift, cycle = early.result()
         else:
-            diag, err, shift = checks(fit, samples, unit, ref)
+            diag, err, shift, cycle = checks(fit, samples, unit, ref)
     if len(cands) >= DEGENERATE_MIN and all(c.lr_stat < DEGENERATE_LR for c in cands):
         notes.append("every candidate's LR is 0: the fit sits at a degenerate optimum (each "
                      "refit, started also from the saturated reference's random part, "
                      "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift)
+    reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift, cycle)
     return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
                   redundant=tuple(redundant_terms(samples, model, fit, alpha))
                   if not reasons else (),
                   look_alikes=tuple(look_alikes(cands, alpha_each)), reasons=tuple(reasons),
                   model_error=err, notes=tuple(notes), unit=unit, reference=ref,
-                  level_shift=shift)
+                  level_shift=shift, periodic=cycle)
