@@ -43,10 +43,12 @@ HOURS = 6.0
 
 def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
                  progress: bool = False, lrs: dict[str, list[tuple]] | None = None,
-                 shifts: list[tuple[float, float]] | None = None):
+                 shifts: list[tuple[float, float]] | None = None,
+                 lines: list[tuple[float, float]] | None = None):
     """(alarms, reasons Counter, seconds per run) over ``n_runs`` clean runs; ``lrs``, when
     given, collects each candidate's (LR, df, p, test) per run (under the null p is
-    uniform: P(p < a) = a); ``shifts`` the level shift's (score, p) per run."""
+    uniform: P(p < a) = a); ``shifts`` the level shift's (score, p) per run, ``lines`` the
+    periodic line's (Fisher's g, p)."""
     alarms = 0
     why: Counter[str] = Counter()
     t0 = time.perf_counter()
@@ -62,6 +64,8 @@ def false_alarms(n_runs: int, first_seed: int = 1000, hours: float = HOURS,
                                                        c.test))
             if shifts is not None and rep.level_shift is not None:
                 shifts.append((rep.level_shift.stat, rep.level_shift.p_value))
+            if lines is not None and rep.periodic is not None:
+                lines.append((rep.periodic.g, rep.periodic.p_value))
             if not rep.adequate:
                 alarms += 1
                 for r in rep.reasons:
@@ -86,7 +90,9 @@ def main() -> None:
     hours = float(sys.argv[2]) if len(sys.argv) > 2 else HOURS
     lrs: dict[str, list[tuple]] = {}
     shifts: list[tuple[float, float]] = []
-    k, why, per = false_alarms(n, hours=hours, progress=True, lrs=lrs, shifts=shifts)
+    lines: list[tuple[float, float]] = []
+    k, why, per = false_alarms(n, hours=hours, progress=True, lrs=lrs, shifts=shifts,
+                               lines=lines)
     lo, hi = clopper_pearson(k, n)
     print(f"clean runs: {n} ({hours:g}-h chamber cycles from frames), false alarms: {k} = "
           f"{100 * k / n:.1f} % (95 % CI {100 * lo:.1f}–{100 * hi:.1f} %), nominal level of "
@@ -108,6 +114,10 @@ def main() -> None:
               f"the break times)  p < 0.05: {sum(x[1] < 0.05 for x in shifts):3d}/"
               f"{len(shifts)}  p < 0.001 (the verdict's): "
               f"{sum(x[1] < 0.001 for x in shifts)}")
+    if lines:
+        print(f"    periodic     min p {min(x[1] for x in lines):.2g} (Fisher's g)  p < 0.05: "
+              f"{sum(x[1] < 0.05 for x in lines):3d}/{len(lines)}  p < 0.001 (the "
+              f"verdict's): {sum(x[1] < 0.001 for x in lines)}")
     print(f"{per:.2f} s per run (diagnose with every candidate)")
 
 
