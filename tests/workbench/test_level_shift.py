@@ -12,6 +12,7 @@ import pytest
 from gyrostand.cli import main
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose import shift as sh
+from gyrostand.core.diagnose.joint import joint_diagnose
 from gyrostand.core.diagnose.reference import reference_fit
 from gyrostand.core.diagnose.shapes import mean_tangents
 from gyrostand.core.diagnose.verdict import diagnose
@@ -130,3 +131,19 @@ def test_term_new_writes_the_step_and_the_model_with_it_is_adequate(tmp_path, ca
     assert "jump_a" in d["model"]
     assert d["level_shift"]["significant"] is False, d["level_shift"]
     assert d["adequate"] is True, d["reasons"]
+
+
+def test_a_jump_in_one_of_two_runs_is_that_run_s_in_a_joint_diagnosis(tmp_path):
+    # the joint fit absorbs an event of one run; each run is judged against its own
+    # reference (Bonferroni over the runs), and a clean second run shows nothing
+    jump = Samples.read_csv(jump_run(tmp_path, 25))
+    clean = Samples.read_csv(frame_run(tmp_path / "c26.csv", seed=26, drop=0.01))
+    rep = joint_diagnose([jump, clean], Model.parse(BASE_MODEL))
+    assert not rep.adequate
+    named = [r for r in rep.reasons if "a level shift of the drift" in r]
+    assert len(named) == 1 and named[0].startswith("run 1 "), rep.reasons
+    runs = rep.to_dict()["runs"]
+    assert runs[0]["level_shift"]["significant"] is True
+    assert abs(runs[0]["level_shift"]["t"] - AT) <= 2.0
+    assert runs[1]["level_shift"]["significant"] is False
+    assert runs[1]["periodic"]["significant"] is False

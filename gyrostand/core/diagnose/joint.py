@@ -1,5 +1,7 @@
 """``diagnose`` of several runs of one gyro: the joint fit (:mod:`~gyrostand.core.ml.joint`),
-each run's residual check, and the missing effects ranked on the runs together."""
+each run's residual check, each run's level shift and periodic line against its own
+saturated reference (an event of one run — a bias jump, its chamber's cycling — is that
+run's, and the joint fit absorbs it), and the missing effects ranked on the runs together."""
 
 from __future__ import annotations
 
@@ -11,7 +13,10 @@ from ..data import Samples
 from ..ml.joint import JointFit, joint_ml
 from ..model import Model
 from .candidates import rank_candidates
+from .periodic import PERIODIC_ALPHA, Periodic, periodic
+from .reference import reference_fit
 from .results import significant
+from .shift import SHIFT_ALPHA, LevelShift, level_shift, whitened
 from .verdict import redundant_terms
 
 __all__ = ["JointDiagnosis", "joint_diagnose", "WHITE_ALPHA"]
@@ -32,12 +37,18 @@ class JointDiagnosis:
     #: terms of an adequate joint model that no longer earn their place
     #: (:func:`~.verdict.redundant_terms` on the runs together): ``fit --remove`` them
     redundant: tuple[dict[str, Any], ...] = ()
+    #: each run's largest level shift and strongest periodic line against its own
+    #: reference (:func:`run_events`; their levels Bonferroni over the runs)
+    events: tuple[tuple[LevelShift | None, Periodic | None], ...] = ()
 
     @property
     def significant(self) -> list[Any]:
         """Ranked candidates significant on the runs together after Bonferroni, in the
         order proposed (as :attr:`~.results.DiagnoseResult.significant`)."""
         return significant(self.candidates, self.alpha)
+
+    def _events(self) -> tuple[tuple[LevelShift | None, Periodic | None], ...]:
+        return self.events or tuple((None, None) for _ in self.fit.runs)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -46,8 +57,10 @@ class JointDiagnosis:
             "fit": self.fit.to_dict(),
             "repeatability": (self.fit.repeatability.to_dict()
                               if self.fit.repeatability is not None else None),
-            "runs": [{"source": r.source, **dict(r.info.get("residual_check", {}))}
-                     for r in self.fit.runs],
+            "runs": [{"source": r.source, **dict(r.info.get("residual_check", {})),
+                      **({"level_shift": ev[0].to_dict()} if ev[0] is not None else {}),
+                      **({"periodic": ev[1].to_dict()} if ev[1] is not None else {})}
+                     for r, ev in zip(self.fit.runs, self._events(), strict=True)],
             "candidates": [c.to_dict(self.unit) for c in self.candidates],
             "redundant": [dict(x) for x in self.redundant],
         }
@@ -55,6 +68,21 @@ class JointDiagnosis:
 
 #: each run's whiteness test at this level (Bonferroni over the runs)
 WHITE_ALPHA = 0.01
+
+
+def run_events(runs: Sequence[Samples], model: Model, fit: JointFit
+               ) -> tuple[tuple[LevelShift | None, Periodic | None], ...]:
+    """Each run's largest level shift and strongest periodic line against its own
+    saturated reference (the model at the run's joint estimate beside the run's rich
+    basis), at :data:`~.shift.SHIFT_ALPHA` and :data:`~.periodic.PERIODIC_ALPHA` over the
+    number of runs (Bonferroni)."""
+    out = []
+    for s, r in zip(runs, fit.runs, strict=True):
+        ref = reference_fit(s, model, r)
+        at = whitened(s, ref)
+        out.append((level_shift(s, ref, alpha=SHIFT_ALPHA / len(runs), at=at),
+                    periodic(s, ref, alpha=PERIODIC_ALPHA / len(runs), at=at)))
+    return tuple(out)
 
 
 def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05,
@@ -73,6 +101,16 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
         if chk and chk["ljung_box_p"] < WHITE_ALPHA / len(runs):
             reasons.append(f"run {r.info['run']} ({r.source}): innovations are not white "
                            f"(Ljung–Box p = {chk['ljung_box_p']:.2g} over {chk['lags']} lags)")
+    events = run_events(runs, model, fit)
+    for r, (jump, cycle) in zip(fit.runs, events, strict=True):
+        for what, found, like in (("a level shift of the drift", jump, "a bias jump"),
+                                  ("a periodic disturbance of the drift", cycle,
+                                   "its chamber's compressor or fan cycling")):
+            if found is not None and found.significant:
+                reasons.append(
+                    f"run {r.info['run']} ({r.source}): {what} {found.text(unit)}: an event "
+                    f"of that run outside the vocabulary ({like}); its plugin term is that "
+                    "run's next step (term new --from it, README: plugins)")
     sig = significant(cands, alpha)
     if sig:
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} on the "
@@ -82,4 +120,4 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
                       ) if not reasons else ()
     return JointDiagnosis(fit=fit, candidates=tuple(cands), alpha=alpha,
                           adequate=not reasons, reasons=tuple(reasons), unit=unit,
-                          redundant=redundant)
+                          redundant=redundant, events=events)
