@@ -38,6 +38,7 @@ from scipy.special import gammaln
 from ..data import Samples
 from ..threads import one_blas_thread
 from .reference import Reference
+from .results import p_text
 from .shift import Whitened, whitened
 
 __all__ = ["PERIODIC_ALPHA", "Periodic", "fisher_p", "periodic"]
@@ -75,10 +76,9 @@ class Periodic:
 
     def text(self, unit: str) -> str:
         """One line: the period, the amplitude, how sure."""
-        ps = f"{self.p_value:.2g}" if self.p_value >= 1e-300 else "< 1e-300"
         return (f"at a period of {self.period:.4g} s, an amplitude of {self.amplitude:.3g} ± "
                 f"{self.std:.2g} {unit} (Fisher's g {self.g:.3g} over {self.q} periods: "
-                f"p {ps})")
+                f"p {p_text(self.p_value)})")
 
     def to_dict(self) -> dict[str, Any]:
         return {"period": self.period, "amplitude": self.amplitude, "std": self.std,
@@ -90,8 +90,12 @@ class Periodic:
 def fisher_p(g: float, q: int) -> float:
     """P(max I_k / Σ I_k > g) over ``q`` ordinates of white Gaussian noise (Fisher 1929),
     its alternating sum in logarithms (C(q, j) is huge where (1 − j g)^(q−1) is tiny)."""
-    if not 0.0 < g < 1.0 or q < 2:
-        return 1.0 if g <= 0.0 else 0.0
+    if g <= 0.0:
+        return 1.0
+    if g >= 1.0:
+        return 0.0
+    if q < 2:  # one ordinate: g is 1
+        return 1.0
     total = 0.0
     for j in range(1, min(q, int(1.0 / g)) + 1):
         lt = (gammaln(q + 1) - gammaln(j + 1) - gammaln(q - j + 1)

@@ -96,6 +96,12 @@ class Candidate:
         }
 
 
+def p_text(p: float) -> str:
+    """A p-value as the diagnosis prints it: two digits, or ``< 1e-300`` below them (the
+    lack of fit, the level shift, the periodic line)."""
+    return f"{p:.2g}" if p >= 1e-300 else "< 1e-300"
+
+
 def significant(cands: Sequence[Candidate], alpha: float) -> list[Candidate]:
     """The ranked candidates of ``cands`` significant at ``alpha`` after Bonferroni over
     them all, in their order (one run's diagnosis and several runs' alike)."""

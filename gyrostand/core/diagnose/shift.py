@@ -46,6 +46,7 @@ from ..model import Model, context
 from ..threads import one_blas_thread
 from ..validate import prepare
 from .reference import Reference
+from .results import p_text
 from .shapes import mean_tangents
 
 __all__ = ["LevelShift", "SHIFT_ALPHA", "Whitened", "level_shift", "whitened"]
@@ -85,10 +86,9 @@ class LevelShift:
 
     def text(self, unit: str) -> str:
         """One line: where, how large, how sure."""
-        ps = f"{self.p_value:.2g}" if self.p_value >= 1e-300 else "< 1e-300"
         return (f"at t = {self.t:.0f} s, a step of {self.step:+.3g} ± {self.std:.2g} {unit} "
                 f"(score {self.stat:.1f}; Bonferroni over {self.positions} break times: "
-                f"p {ps})")
+                f"p {p_text(self.p_value)})")
 
     def to_dict(self) -> dict[str, Any]:
         return {"t": self.t, "step": self.step, "std": self.std, "stat": self.stat,

@@ -55,7 +55,7 @@ from .reference import (
     Reference,
     reference_fit,
 )
-from .results import Candidate, DiagnoseResult
+from .results import Candidate, DiagnoseResult, p_text
 from .shift import LevelShift, level_shift, whitened
 from .standin import mark_stand_ins
 
@@ -64,9 +64,8 @@ log = logging.getLogger(__name__)
 
 def lack_of_fit_text(ref: Reference) -> str:
     """One line: the lack-of-fit test."""
-    p = ref.p_value
-    ps = f"{p:.2g}" if p >= 1e-300 else "< 1e-300"
-    return f"lack of fit against the saturated reference: LR {ref.lr:.1f} on {ref.df} df, p {ps}"
+    return (f"lack of fit against the saturated reference: LR {ref.lr:.1f} on {ref.df} df, "
+            f"p {p_text(ref.p_value)}")
 
 
 def describe_missing(ref: Reference, unit: str) -> list[str]:
