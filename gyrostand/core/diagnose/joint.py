@@ -1,7 +1,8 @@
 """``diagnose`` of several runs of one gyro: the joint fit (:mod:`~gyrostand.core.ml.joint`),
 each run's residual check, each run's level shift and periodic line against its own
 saturated reference (an event of one run — a bias jump, its chamber's cycling — is that
-run's, and the joint fit absorbs it), and the missing effects ranked on the runs together."""
+run's, and the joint fit absorbs it), and the missing effects ranked on the runs together,
+a shared one only where it repeats from run to run (:mod:`.repeats`)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from ..model import Model
 from .candidates import rank_candidates
 from .periodic import PERIODIC_ALPHA, Periodic, periodic
 from .reference import reference_fit
+from .repeats import mark_unrepeated, slow_process
 from .results import significant
 from .shift import SHIFT_ALPHA, LevelShift, level_shift, whitened
 from .verdict import redundant_terms
@@ -95,6 +97,9 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
     cands = rank_candidates(tuple(runs), model, fit, terms,  # type: ignore[arg-type]
                             alpha=alpha)
     alpha_each = alpha / max(len(cands), 1)
+    # a shared effect must repeat from run to run (:mod:`.repeats`): one that does not is
+    # a random process's or one run's, and the next candidate is proposed
+    cands = mark_unrepeated(runs, model, cands, alpha_each)
     reasons = []
     for r in fit.runs:
         chk = r.info.get("residual_check", {})
@@ -112,6 +117,15 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
                     f"of that run outside the vocabulary ({like}); its plugin term is that "
                     "run's next step (term new --from it, README: plugins)")
     sig = significant(cands, alpha)
+    unrepeated = [c for c in cands if c.repeats is not None and not c.repeats.repeats]
+    if unrepeated and not sig and not slow_process(model):
+        # nothing else proposed and no second random process in the model to stand for it
+        c = unrepeated[0]
+        assert c.repeats is not None
+        reasons.append(f"{c.term} is significant on the {len(runs)} runs together (p = "
+                       f"{c.p_value:.2g}) but {c.repeats.text()}: not an effect of the "
+                       "gyro; a random process or one run's event stands in for it, and "
+                       "the model has no random process but its first")
     if sig:
         reasons.append(f"{', '.join(c.term for c in sig)} significant at {alpha:g} on the "
                        f"{len(runs)} runs together (Bonferroni over {len(cands)} candidates: "

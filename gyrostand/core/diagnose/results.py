@@ -17,6 +17,7 @@ from .reference import Reference
 
 if TYPE_CHECKING:
     from .periodic import Periodic
+    from .repeats import Repeats
     from .shift import LevelShift
 
 
@@ -44,7 +45,9 @@ class Candidate:
     refitted (then ``lr_stat``, ``df``, ``p_value`` and ΔAIC/ΔBIC are the LM test's,
     ``effect`` is empty and the candidate is not ranked); ``stand_in``: a random process
     standing in for a deterministic misfit of temperature that the saturated reference
-    shows (:mod:`.standin`: not ranked, ``note`` says why).
+    shows (:mod:`.standin`: not ranked, ``note`` says why). ``repeats``: on several runs,
+    whether its effect repeats across them (:mod:`.repeats`; None: not tested); one that
+    does not is not ranked.
     """
 
     term: str
@@ -72,11 +75,12 @@ class Candidate:
     screened: bool = False
     stand_in: bool = False
     tied: bool = False
+    repeats: Repeats | None = None
 
     @property
     def ranked(self) -> bool:
         return (self.identified and not self.at_bound and not self.screened
-                and not self.stand_in)
+                and not self.stand_in and (self.repeats is None or self.repeats.repeats))
 
     def to_dict(self, drift_unit: str = DRIFT_UNIT) -> dict[str, Any]:
         return {
@@ -93,6 +97,8 @@ class Candidate:
             "traded": list(self.traded),
             "score_stat": self.score_stat, "score_p": self.score_p,
             "screened": self.screened, "stand_in": self.stand_in, "tied": self.tied,
+            # several runs only (one run's JSON keeps its keys)
+            **({"repeats": self.repeats.to_dict()} if self.repeats is not None else {}),
         }
 
 
