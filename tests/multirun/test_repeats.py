@@ -95,3 +95,31 @@ def test_a_trend_that_does_not_repeat_is_not_proposed(tmp_path):
     assert "does not repeat across the 2 runs (Cochran's Q" in text
     assert rep.to_dict()["candidates"][[c.term for c in rep.candidates].index("trend")][
         "repeats"]["repeats"] is False
+
+
+def test_the_model_s_own_thermal_coefficient_is_checked_run_by_run(tmp_path):
+    # the same gyro twice: temp.gamma repeats; then a second switch-on whose thermal
+    # coefficient is twice the first's (a mounting changed): it does not, and the verdict
+    # says so
+    m = Model.parse(BASE_MODEL)
+    same = [Samples.read_csv(frame_run(tmp_path / f"s{k}.csv", seed=51 + k, drop=0.01))
+            for k in range(2)]
+    rep = joint_diagnose(same, m)
+    (temp,) = rep.repeats
+    assert temp.term == "temp" and temp.names == ("temp.gamma",) and temp.repeats
+    for (v,), (s,) in zip(temp.values, temp.stds, strict=True):
+        assert abs(v - (-0.0005)) < 4 * s
+    assert not any("does not repeat" in r for r in rep.reasons)
+    assert "does each shared effect repeat?" in joint_diagnosis(rep)
+    assert rep.to_dict()["repeats"][0]["repeats"] is True
+
+    other = Samples.read_csv(frame_run(tmp_path / "o.csv", seed=53, drop=0.01,
+                                       params={"temp.gamma": -0.001}))
+    rep = joint_diagnose([same[0], other], m)
+    (temp,) = rep.repeats
+    assert not temp.repeats and temp.p_value < REPEAT_ALPHA
+    assert temp.values[1][0] == pytest.approx(-0.001, abs=4 * temp.stds[1][0])
+    assert not rep.adequate
+    assert any(r.startswith("the model's temp does not repeat across the 2 runs")
+               for r in rep.reasons), rep.reasons
+    assert "DOES NOT REPEAT" in joint_diagnosis(rep)

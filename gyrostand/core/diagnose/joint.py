@@ -16,7 +16,7 @@ from ..model import Model
 from .candidates import rank_candidates
 from .periodic import PERIODIC_ALPHA, Periodic, periodic
 from .reference import reference_fit
-from .repeats import mark_unrepeated, slow_process
+from .repeats import Repeats, mark_unrepeated, model_repeats, slow_process
 from .results import significant
 from .shift import SHIFT_ALPHA, LevelShift, level_shift, whitened
 from .verdict import redundant_terms
@@ -42,6 +42,9 @@ class JointDiagnosis:
     #: each run's largest level shift and strongest periodic line against its own
     #: reference (:func:`run_events`; their levels Bonferroni over the runs)
     events: tuple[tuple[LevelShift | None, Periodic | None], ...] = ()
+    #: whether each shared effect of the model repeats across the runs (each run fitted
+    #: alone; :func:`~.repeats.model_repeats`)
+    repeats: tuple[Repeats, ...] = ()
 
     @property
     def significant(self) -> list[Any]:
@@ -65,6 +68,7 @@ class JointDiagnosis:
                      for r, ev in zip(self.fit.runs, self._events(), strict=True)],
             "candidates": [c.to_dict(self.unit) for c in self.candidates],
             "redundant": [dict(x) for x in self.redundant],
+            "repeats": [r.to_dict() for r in self.repeats],
         }
 
 
@@ -107,6 +111,12 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
             reasons.append(f"run {r.info['run']} ({r.source}): innovations are not white "
                            f"(Ljung–Box p = {chk['ljung_box_p']:.2g} over {chk['lags']} lags)")
     events = run_events(runs, model, fit)
+    repeats = model_repeats(runs, model, fit)
+    for rep in repeats:
+        if not rep.repeats:
+            reasons.append(f"the model's {rep.term} {rep.text()}: one value for every "
+                           "switch-on does not describe these runs (an effect it stands in "
+                           "for is missing, or the runs differ)")
     for r, (jump, cycle) in zip(fit.runs, events, strict=True):
         for what, found, like in (("a level shift of the drift", jump, "a bias jump"),
                                   ("a periodic disturbance of the drift", cycle,
@@ -134,4 +144,4 @@ def joint_diagnose(runs: Sequence[Samples], model: Model, *, alpha: float = 0.05
                       ) if not reasons else ()
     return JointDiagnosis(fit=fit, candidates=tuple(cands), alpha=alpha,
                           adequate=not reasons, reasons=tuple(reasons), unit=unit,
-                          redundant=redundant, events=events)
+                          redundant=redundant, events=events, repeats=repeats)

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,11 +49,13 @@ from ..chisq import chi2_sf
 from ..data import Samples
 from ..ml.fit import ml
 from ..model import Model
+from ..results import FitResult
 from ..terms.builtin import TERMS
 from .results import Candidate
 
-__all__ = ["REPEAT_ALPHA", "Repeats", "mark_unrepeated", "repeat_test", "slow_process",
-           "compared_coefficients"]
+__all__ = ["REPEAT_ALPHA", "Repeats", "compared_coefficients", "mark_unrepeated",
+           "model_repeats", "per_run_fits", "q_of", "q_statistic", "repeat_test",
+           "shared_effect", "slow_process"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +93,14 @@ class Repeats:
         return (f"{verb} across the {len(self.values)} runs (Cochran's Q {self.stat:.1f} on "
                 f"{self.df} df, p {self.p_value:.2g}; {per})")
 
+    def row(self) -> str:
+        """One line of the table of the model's own shared effects."""
+        return (f"  {self.term:<12} Q {self.stat:7.2f} on {self.df} df  p {self.p_value:9.2g}  "
+                f"{'repeats' if self.repeats else 'DOES NOT REPEAT'}  ("
+                + "; ".join(f"{n} " + ", ".join(f"{v[i]:.3g} ± {s[i]:.2g}" for v, s in zip(
+                    self.values, self.stds, strict=True)) for i, n in enumerate(self.names))
+                + ")")
+
     def to_dict(self) -> dict[str, Any]:
         return {"term": self.term, "names": list(self.names),
                 "values": [list(v) for v in self.values],
@@ -98,15 +108,22 @@ class Repeats:
                 "p_value": self.p_value, "alpha": self.alpha, "repeats": self.repeats}
 
 
+def _linear(model: Model, term: str) -> tuple[str, ...]:
+    """``term``'s linear coefficients in ``model``."""
+    return tuple(n for n, q in model.params if n.split(".")[0] == term and q.kind == "linear")
+
+
+def shared_effect(term: str) -> bool:
+    """Whether ``term`` is a deterministic effect the runs share (not a random process,
+    not a per-run term such as the turn-on bias or a warm-up)."""
+    cls = TERMS.get(term)
+    return cls is not None and cls.n_states == 0 and not getattr(cls, "per_run", False)
+
+
 def compared_coefficients(model: Model, term: str) -> tuple[str, ...]:
     """The linear coefficients of ``term`` (added to ``model``) whose repetition across
     runs is tested: none for a random process, a per-run term or a term without one."""
-    cls = TERMS.get(term)
-    if cls is None or cls.n_states > 0 or getattr(cls, "per_run", False):
-        return ()
-    bigger = model.add(term)
-    return tuple(n for n, q in bigger.params
-                 if n not in model.param_names and q.kind == "linear")
+    return _linear(model.add(term), term) if shared_effect(term) else ()
 
 
 def slow_process(model: Model) -> bool:
@@ -126,24 +143,28 @@ def q_statistic(values: Sequence[np.ndarray], covs: Sequence[np.ndarray]) -> flo
                      for w, b in zip(weights, values, strict=True)))
 
 
-def repeat_test(runs: Sequence[Samples], model: Model, cand: Candidate,
-                alpha: float = REPEAT_ALPHA) -> Repeats | None:
-    """Cochran's Q of ``cand``'s linear coefficients over ``runs``, each run refitted
-    alone with the candidate (from its own values in the candidate's joint fit); None
-    where the term is not tested (:func:`compared_coefficients`) or a run's fit fails."""
-    names = compared_coefficients(model, cand.term)
-    if not names or len(runs) < 2:
-        return None
-    bigger = model.add(cand.term)
-    joint_runs = getattr(cand.result, "runs", None)
-    values, covs = [], []
+def per_run_fits(runs: Sequence[Samples], model: Model,
+                 starts: Sequence[Mapping[str, float]] | None) -> list[FitResult] | None:
+    """``model`` fitted to each run alone by ML (from ``starts``, each run's values in a
+    joint fit: one local search; else from ML's start grid), or None if a fit fails."""
+    out = []
     for i, s in enumerate(runs):
-        start = joint_runs[i].values if joint_runs is not None else None
+        start = starts[i] if starts is not None else None
         try:
-            r = ml(s, bigger, start=start, grid=start is None, n_local=1, hessian_passes=1)
+            out.append(ml(s, model, start=start, grid=start is None, n_local=1,
+                          hessian_passes=1))
         except GyrostandError as exc:
-            log.info("%s: the repetition of %s not tested: %s", s.source, cand.term, exc)
+            log.info("%s: each run alone not fitted: %s", s.source, exc)
             return None
+    return out
+
+
+def q_of(term: str, names: tuple[str, ...], fits: Sequence[FitResult],
+         alpha: float = REPEAT_ALPHA) -> Repeats | None:
+    """Cochran's Q of the coefficients ``names`` of ``term`` over per-run ``fits`` (their
+    covariance blocks); None where a fit has no usable covariance for them."""
+    values, covs = [], []
+    for r in fits:
         if r.covariance is None or any(n not in r.cov_names for n in names):
             return None
         idx = [r.cov_names.index(n) for n in names]
@@ -153,11 +174,42 @@ def repeat_test(runs: Sequence[Samples], model: Model, cand: Candidate,
         values.append(np.array([r.value(n) for n in names]))
         covs.append(cov)
     stat = q_statistic(values, covs)
-    df = (len(runs) - 1) * len(names)
-    return Repeats(term=cand.term, names=names,
+    df = (len(fits) - 1) * len(names)
+    return Repeats(term=term, names=names,
                    values=tuple(tuple(float(x) for x in v) for v in values),
                    stds=tuple(tuple(float(x) for x in np.sqrt(np.diag(c))) for c in covs),
                    stat=stat, df=df, p_value=float(chi2_sf(stat, df)), alpha=alpha)
+
+
+def repeat_test(runs: Sequence[Samples], model: Model, cand: Candidate,
+                alpha: float = REPEAT_ALPHA) -> Repeats | None:
+    """Cochran's Q of ``cand``'s linear coefficients over ``runs``, each run refitted
+    alone with the candidate (from its own values in the candidate's joint fit); None
+    where the term is not tested (:func:`compared_coefficients`) or a run's fit fails."""
+    names = compared_coefficients(model, cand.term)
+    if not names or len(runs) < 2:
+        return None
+    joint_runs = getattr(cand.result, "runs", None)
+    fits = per_run_fits(runs, model.add(cand.term),
+                        [r.values for r in joint_runs] if joint_runs is not None else None)
+    return q_of(cand.term, names, fits, alpha) if fits is not None else None
+
+
+def model_repeats(runs: Sequence[Samples], model: Model, fit: Any,
+                  alpha: float = REPEAT_ALPHA) -> tuple[Repeats, ...]:
+    """Whether each shared effect of ``model`` itself repeats across ``runs``: the model
+    fitted to each run alone (from its values in the joint ``fit``), Cochran's Q of each
+    shared deterministic term's linear coefficients, at ``alpha`` over the terms tested
+    (Bonferroni). One that does not means one value for every switch-on does not describe
+    the runs (an effect the term stands in for is missing, or the runs differ)."""
+    terms = [t for t in model.names if shared_effect(t) and _linear(model, t)]
+    if len(runs) < 2 or not terms:
+        return ()
+    fits = per_run_fits(runs, model, [r.values for r in fit.runs])
+    if fits is None:
+        return ()
+    out = (q_of(t, _linear(model, t), fits, alpha / len(terms)) for t in terms)
+    return tuple(r for r in out if r is not None)
 
 
 def mark_unrepeated(runs: Sequence[Samples], model: Model, cands: Sequence[Candidate],
