@@ -123,3 +123,20 @@ def test_the_model_s_own_thermal_coefficient_is_checked_run_by_run(tmp_path):
     assert any(r.startswith("the model's temp does not repeat across the 2 runs")
                for r in rep.reasons), rep.reasons
     assert "DOES NOT REPEAT" in joint_diagnosis(rep)
+
+
+def test_a_lone_unrepeated_effect_is_a_reason_unless_a_second_process_is_its_wander(tmp_path):
+    # the trend the only candidate: nothing else to propose, so the verdict names it; with
+    # a random walk in the model (the wander it can be) it is a note only
+    runs = _runs(tmp_path, 1e-5, 3e-5, 41)
+    rep = joint_diagnose(runs, Model.parse(BASE_MODEL), terms=["trend"])
+    (trend,) = rep.candidates
+    assert not trend.ranked and not rep.significant and not rep.adequate
+    (reason,) = [r for r in rep.reasons if r.startswith("trend is significant on the 2 runs")]
+    assert "does not repeat" in reason
+    assert "the model has no random process but its first" in reason
+    walk = joint_diagnose(runs, Model.parse(BASE_MODEL + ",random_walk"), terms=["trend"])
+    (trend,) = walk.candidates
+    assert trend.p_value < walk.alpha and trend.repeats is not None
+    assert not trend.repeats.repeats and not trend.ranked
+    assert not any(r.startswith("trend is significant") for r in walk.reasons), walk.reasons
