@@ -14,15 +14,16 @@ What separates them is whether the effect *repeats*: each run is fitted alone wi
 candidate, and its linear coefficients are compared across the runs by Cochran's Q (the
 inverse-covariance-weighted spread around their common estimate; with covariances V_r of
 the k coefficients b_r, b̄ = (Σ V_r⁻¹)⁻¹ Σ V_r⁻¹ b_r and Q = Σ (b_r − b̄)' V_r⁻¹ (b_r − b̄)
-~ χ²((R − 1) k) when the runs share one effect). Measured on 4-h runs built from frames,
-their second run the seed + 100 (benchmarks/advice_sequence.py's data, the trend fitted
-to each run alone):
+~ χ²((R − 1) k) when the runs share one effect). Measured (benchmarks/results/repeats.txt:
+pairs of 4-h runs built from frames, benchmarks/advice_sequence.py's data, each run fitted
+alone):
 
-* a true trend (20 pairs) and a true trend beside a hidden temp_rate (20 pairs): Q at most
-  1.84 (p ≥ 0.17; the per-run standard errors slightly conservative, mean Q 0.5);
-* a walk, the trend fitted in its place: Q 12-490 (p < 0.001) on 13 of 20 pairs, and on 10
-  of 20 with a lagged temperature beside the walk (518: p 1.4e-4 — a tie the joint
-  likelihood decided for the trend).
+* under the true model (clean, a temp_rate, a walk, a warm-up + T², a trend, temp_rate +
+  trend; 20 pairs each) 200 tests of the shared terms: p < 0.05 on 10, p < 0.001 on none
+  (the smallest 0.0018); a true trend's p ≥ 0.17;
+* a trend fitted where a walk is the truth: p < 0.001 on 13 of 20 pairs, and on 11 of 20
+  with a lagged temperature beside the walk (518: p 1.4e-4 — a tie the joint likelihood
+  decided for the trend).
 
 A significant shared deterministic candidate whose Q is significant at
 :data:`REPEAT_ALPHA` is not ranked: its note says that it does not repeat (a random
@@ -30,8 +31,9 @@ process, or an event of one run, stands in for it), and the next candidate is pr
 Where nothing else is significant and the model's random part is its first process alone
 (:func:`slow_process`), the verdict says so too: what drives it is missing. With a walk in
 the model a shared trend can stay significant and not repeat (518 after the walk: joint p
-7.8e-5, Q p 1.3e-4, the two runs' walks drifting the same way): the walk is that wander. Per-run terms (the turn-on bias, a warm-up: each switch-on its own) and random
-processes are not tested; nor is a term without a linear coefficient (a lag).
+7.8e-5, Q p 1.3e-4, the two runs' walks drifting the same way): the walk is that wander.
+Per-run terms (the turn-on bias, a warm-up: each switch-on its own) and random processes
+are not tested; nor is a term without a linear coefficient (a lag).
 """
 
 from __future__ import annotations
@@ -59,8 +61,8 @@ __all__ = ["REPEAT_ALPHA", "Repeats", "compared_coefficients", "mark_unrepeated"
 
 log = logging.getLogger(__name__)
 
-#: a shared effect whose per-run coefficients differ at this level does not repeat (a
-#: true trend's Q reached p 0.17 at the lowest on 40 pairs; the walks' 1e-4 and below)
+#: a shared effect whose per-run coefficients differ at this level does not repeat (under
+#: the true model none of 200 tests on pairs of 4-h runs went below it)
 REPEAT_ALPHA = 0.001
 
 
