@@ -3,9 +3,12 @@ Q of the per-run coefficients, in the joint diagnosis of several runs built from
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from gyrostand.cli import main
 from gyrostand.core.chisq import chi2_sf
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.joint import joint_diagnose
@@ -97,7 +100,7 @@ def test_a_trend_that_does_not_repeat_is_not_proposed(tmp_path):
         "repeats"]["repeats"] is False
 
 
-def test_the_model_s_own_thermal_coefficient_is_checked_run_by_run(tmp_path):
+def test_the_model_s_own_thermal_coefficient_is_checked_run_by_run(tmp_path, capsys):
     # the same gyro twice: temp.gamma repeats; then a second switch-on whose thermal
     # coefficient is twice the first's (a mounting changed): it does not, and the verdict
     # says so
@@ -113,16 +116,20 @@ def test_the_model_s_own_thermal_coefficient_is_checked_run_by_run(tmp_path):
     assert "does each shared effect repeat?" in joint_diagnosis(rep)
     assert rep.to_dict()["repeats"][0]["repeats"] is True
 
-    other = Samples.read_csv(frame_run(tmp_path / "o.csv", seed=53, drop=0.01,
-                                       params={"temp.gamma": -0.001}))
-    rep = joint_diagnose([same[0], other], m)
-    (temp,) = rep.repeats
-    assert not temp.repeats and temp.p_value < REPEAT_ALPHA
-    assert temp.values[1][0] == pytest.approx(-0.001, abs=4 * temp.stds[1][0])
-    assert not rep.adequate
+    # through the command, as a user runs it on the two CSVs
+    other = frame_run(tmp_path / "o.csv", seed=53, drop=0.01, params={"temp.gamma": -0.001})
+    first = str(tmp_path / "s0.csv")
+    assert main(["diagnose", first, str(other), "--model", BASE_MODEL, "--format",
+                 "json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    (temp,) = doc["repeats"]
+    assert temp["term"] == "temp" and not temp["repeats"] and temp["p_value"] < REPEAT_ALPHA
+    assert temp["values"][1][0] == pytest.approx(-0.001, abs=4 * temp["stds"][1][0])
+    assert not doc["adequate"]
     assert any(r.startswith("the model's temp does not repeat across the 2 runs")
-               for r in rep.reasons), rep.reasons
-    assert "DOES NOT REPEAT" in joint_diagnosis(rep)
+               for r in doc["reasons"]), doc["reasons"]
+    assert main(["diagnose", first, str(other), "--model", BASE_MODEL]) == 0
+    assert "DOES NOT REPEAT" in capsys.readouterr().out
 
 
 def test_a_lone_unrepeated_effect_is_a_reason_unless_a_second_process_is_its_wander(tmp_path):
