@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.advice_sequence import data  # noqa: E402
 from gyrostand.core.diagnose.repeats import (  # noqa: E402
     REPEAT_ALPHA,
+    linear_coefficients,
     per_run_fits,
     q_of,
     shared_effect,
@@ -52,8 +53,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for kind, model, truth in CASES:
             m = Model.parse(model)
-            terms = [t for t in m.names if shared_effect(t) and any(
-                n.split(".")[0] == t and q.kind == "linear" for n, q in m.params)]
+            terms = [t for t in m.names if shared_effect(t) and linear_coefficients(m, t)]
             if not truth:
                 terms = ["trend"]
             ps: dict[str, list[float]] = {t: [] for t in terms}
@@ -64,9 +64,7 @@ def main() -> None:
                 if fits is None:
                     continue
                 for t in terms:
-                    names = tuple(n for n, q in m.params
-                                  if n.split(".")[0] == t and q.kind == "linear")
-                    rep = q_of(t, names, fits)
+                    rep = q_of(t, linear_coefficients(m, t), fits)
                     if rep is not None:
                         ps[t].append(rep.p_value)
             what = "true model" if truth else "trend in place of the walk"

@@ -55,8 +55,8 @@ from ..results import FitResult
 from ..terms.builtin import TERMS
 from .results import Candidate
 
-__all__ = ["REPEAT_ALPHA", "Repeats", "compared_coefficients", "mark_unrepeated",
-           "model_repeats", "per_run_fits", "q_of", "q_statistic", "repeat_test",
+__all__ = ["REPEAT_ALPHA", "Repeats", "compared_coefficients", "linear_coefficients",
+           "mark_unrepeated", "model_repeats", "per_run_fits", "q_of", "q_statistic", "repeat_test",
            "shared_effect", "slow_process"]
 
 log = logging.getLogger(__name__)
@@ -85,23 +85,23 @@ class Repeats:
         """Whether the runs are consistent with one effect (Q not significant)."""
         return not self.p_value < self.alpha
 
-    def text(self) -> str:
-        """The per-run estimates and Q, as the note and the verdict print them."""
-        per = "; ".join(
+    def per_run(self) -> str:
+        """Each coefficient's estimate ± std in each run."""
+        return "; ".join(
             f"{n} per run " + ", ".join(f"{v[i]:.3g} ± {s[i]:.2g}"
                                         for v, s in zip(self.values, self.stds, strict=True))
             for i, n in enumerate(self.names))
+
+    def text(self) -> str:
+        """The per-run estimates and Q, as the note and the verdict print them."""
         verb = "repeats" if self.repeats else "does not repeat"
         return (f"{verb} across the {len(self.values)} runs (Cochran's Q {self.stat:.1f} on "
-                f"{self.df} df, p {self.p_value:.2g}; {per})")
+                f"{self.df} df, p {self.p_value:.2g}; {self.per_run()})")
 
     def row(self) -> str:
         """One line of the table of the model's own shared effects."""
         return (f"  {self.term:<12} Q {self.stat:7.2f} on {self.df} df  p {self.p_value:9.2g}  "
-                f"{'repeats' if self.repeats else 'DOES NOT REPEAT'}  ("
-                + "; ".join(f"{n} " + ", ".join(f"{v[i]:.3g} ± {s[i]:.2g}" for v, s in zip(
-                    self.values, self.stds, strict=True)) for i, n in enumerate(self.names))
-                + ")")
+                f"{'repeats' if self.repeats else 'DOES NOT REPEAT'}  ({self.per_run()})")
 
     def to_dict(self) -> dict[str, Any]:
         return {"term": self.term, "names": list(self.names),
@@ -110,7 +110,7 @@ class Repeats:
                 "p_value": self.p_value, "alpha": self.alpha, "repeats": self.repeats}
 
 
-def _linear(model: Model, term: str) -> tuple[str, ...]:
+def linear_coefficients(model: Model, term: str) -> tuple[str, ...]:
     """``term``'s linear coefficients in ``model``."""
     return tuple(n for n, q in model.params if n.split(".")[0] == term and q.kind == "linear")
 
@@ -125,7 +125,7 @@ def shared_effect(term: str) -> bool:
 def compared_coefficients(model: Model, term: str) -> tuple[str, ...]:
     """The linear coefficients of ``term`` (added to ``model``) whose repetition across
     runs is tested: none for a random process, a per-run term or a term without one."""
-    return _linear(model.add(term), term) if shared_effect(term) else ()
+    return linear_coefficients(model.add(term), term) if shared_effect(term) else ()
 
 
 def slow_process(model: Model) -> bool:
@@ -204,13 +204,13 @@ def model_repeats(runs: Sequence[Samples], model: Model, fit: Any,
     shared deterministic term's linear coefficients, at ``alpha`` over the terms tested
     (Bonferroni). One that does not means one value for every switch-on does not describe
     the runs (an effect the term stands in for is missing, or the runs differ)."""
-    terms = [t for t in model.names if shared_effect(t) and _linear(model, t)]
+    terms = [t for t in model.names if shared_effect(t) and linear_coefficients(model, t)]
     if len(runs) < 2 or not terms:
         return ()
     fits = per_run_fits(runs, model, [r.values for r in fit.runs])
     if fits is None:
         return ()
-    out = (q_of(t, _linear(model, t), fits, alpha / len(terms)) for t in terms)
+    out = (q_of(t, linear_coefficients(model, t), fits, alpha / len(terms)) for t in terms)
     return tuple(r for r in out if r is not None)
 
 
