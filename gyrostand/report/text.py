@@ -11,6 +11,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from ..core.diagnose.joint import JointDiagnosis
+from ..core.diagnose.repeats import repeats_table
 from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import fit_table, shown_warnings, unit_text
@@ -459,12 +460,8 @@ def joint_diagnosis(d: JointDiagnosis) -> str:
     lines = [f"model    {','.join(d.fit.model.names)}   ({len(d.fit.runs)} runs, joint)",
              f"verdict  {'ADEQUATE' if d.adequate else 'NOT ADEQUATE'}"]
     lines += [f"         - {r}" for r in d.reasons]
-    lines += ["", joint_fit(d.fit, d.unit), ""]
-    if d.repeats:
-        lines += ["does each shared effect repeat? (each run fitted alone; Cochran's Q, "
-                  f"p < {d.repeats[0].alpha:.2g}: it does not)",
-                  *[r.row() for r in d.repeats], ""]
-    lines += ["missing effects (each refitted on every run jointly; LR = joint LR)",
+    lines += ["", joint_fit(d.fit, d.unit), "", *repeats_table(d.repeats),
+              "missing effects (each refitted on every run jointly; LR = joint LR)",
               f"  {'term':<12} {'LR':>9} {'df':>3} {'p':>9} {'ΔBIC':>9}  note"]
     for c in d.candidates:
         lines.append(f"  {c.term:<12} {c.lr_stat:9.2f} {c.df:3d} {c.p_value:9.2g} "

@@ -110,6 +110,15 @@ class Repeats:
                 "p_value": self.p_value, "alpha": self.alpha, "repeats": self.repeats}
 
 
+def repeats_table(reps: Sequence[Repeats]) -> list[str]:
+    """The text table of the model's own shared effects (a title, a row each, a blank
+    line), or no lines."""
+    if not reps:
+        return []
+    return [f"does each shared effect repeat? (each run fitted alone; Cochran's Q, "
+            f"p < {reps[0].alpha:.2g}: it does not)", *[r.row() for r in reps], ""]
+
+
 def linear_coefficients(model: Model, term: str) -> tuple[str, ...]:
     """``term``'s linear coefficients in ``model``."""
     return tuple(n for n, q in model.params if n.split(".")[0] == term and q.kind == "linear")
