@@ -50,14 +50,15 @@ from ...errors import GyrostandError
 from ..chisq import chi2_sf
 from ..data import Samples
 from ..ml.fit import ml
+from ..ml.joint import JointFit
 from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import TERMS
-from .results import Candidate
+from .results import Candidate, p_text
 
 __all__ = ["REPEAT_ALPHA", "Repeats", "compared_coefficients", "linear_coefficients",
-           "mark_unrepeated", "model_repeats", "per_run_fits", "q_of", "q_statistic", "repeat_test",
-           "shared_effect", "slow_process"]
+           "mark_unrepeated", "model_repeats", "per_run_fits", "q_of", "q_statistic",
+           "repeat_test", "repeats_table", "shared_effect", "slow_process"]
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +97,7 @@ class Repeats:
         """The per-run estimates and Q, as the note and the verdict print them."""
         verb = "repeats" if self.repeats else "does not repeat"
         return (f"{verb} across the {len(self.values)} runs (Cochran's Q {self.stat:.1f} on "
-                f"{self.df} df, p {self.p_value:.2g}; {self.per_run()})")
+                f"{self.df} df, p {p_text(self.p_value)}; {self.per_run()})")
 
     def row(self) -> str:
         """One line of the table of the model's own shared effects."""
@@ -206,7 +207,7 @@ def repeat_test(runs: Sequence[Samples], model: Model, cand: Candidate,
     return q_of(cand.term, names, fits, alpha) if fits is not None else None
 
 
-def model_repeats(runs: Sequence[Samples], model: Model, fit: Any,
+def model_repeats(runs: Sequence[Samples], model: Model, fit: JointFit,
                   alpha: float = REPEAT_ALPHA) -> tuple[Repeats, ...]:
     """Whether each shared effect of ``model`` itself repeats across ``runs``: the model
     fitted to each run alone (from its values in the joint ``fit``), Cochran's Q of each
@@ -230,8 +231,8 @@ def mark_unrepeated(runs: Sequence[Samples], model: Model, cands: Sequence[Candi
     kept in ``repeats``); one that does not repeat is not ranked and its note says why."""
     out = []
     for c in cands:
-        if c.ranked and c.p_value < alpha_each and compared_coefficients(model, c.term):
-            rep = repeat_test(runs, model, c)
+        if c.ranked and c.p_value < alpha_each:
+            rep = repeat_test(runs, model, c)  # None for a term it does not compare
             if rep is not None:
                 note = c.note if rep.repeats else (
                     f"{rep.text()}: not an effect of the gyro — a random process or one "
