@@ -11,12 +11,13 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from ..core.diagnose.joint import JointDiagnosis
-from ..core.diagnose.repeats import repeats_table
 from ..core.ml.joint import JointFit
 from ..core.results import FitResult
 from ..core.summary import fit_table, shown_warnings, unit_text
 from . import ByKind
 from .allan_text import allan
+from .cells import estimate, law, tests_used
+from .joint_text import joint_diagnosis, joint_fit
 from .lackfit import level_shift, periodic, reference
 from .segments import number, open_loop_by_segment
 from .views import FIT_RUN, AllanView, DiagnosisView, FitStepView, ReportPage, RunFinals, RunSummary
@@ -29,13 +30,6 @@ if TYPE_CHECKING:
 __all__ = ["RENDERER", "fit_result", "diagnosis", "model_error", "fit_step",
            "result_table", "run_summary", "run_report", "estimate", "SAME_SIGMA", "joint_fit",
            "joint_diagnosis"]
-
-
-def estimate(value: float, std: float, unit: str, fixed: bool = False,
-             drift_unit: str = "y") -> str:
-    """``value ± std unit`` (``fixed`` for a held value), the unit as printed."""
-    sd = "fixed" if fixed else f"± {std:.3g}"
-    return f"{value:.6g} {sd} {unit_text(unit, drift_unit)}"
 
 
 # ---- identify ----------------------------------------------------------------------------
@@ -139,7 +133,7 @@ def diagnosis(rep: DiagnoseResult, source: str, fit_command: str = FIT_RUN,
         lines.append("")
         for x in rep.redundant:
             lines.append(f"redundant: {x['term']} no longer earns its place (LR "
-                         f"{x['lr_stat']:.2f} on {x['df']} df{_test(x['test'])}, p = "
+                         f"{x['lr_stat']:.2f} on {x['df']} df{law(x['test'])}, p = "
                          f"{x['p_value']:.2g}): the model is adequate without it")
         lines.append(f"next: {fit_command} --remove {rep.redundant[0]['term']}")
     elif rep.adequate and adopt_command:
@@ -203,13 +197,6 @@ def second_run_command(fit_command: str) -> str:
             else "gyrostand diagnose RUN SECOND_RUN")
 
 
-def _test(name: str) -> str:
-    """`` (the test)`` after an LR's df when it is not plain χ²(df)."""
-    short = {"chi2 mixture": "½χ²(0) + ½χ²(df)", "chi2 +1 df": "χ², one df more",
-             "sup over shape": "sup over its shape"}
-    return "" if name == "chi2" else f" ({short.get(name, name)})"
-
-
 def fit_step(view: FitStepView) -> str:
     """Before and after of one model change side by side, the likelihood-ratio test."""
     step = view.step
@@ -239,13 +226,13 @@ def fit_step(view: FitStepView) -> str:
     if step.df == 0:
         lines.append(f"same number of parameters; 2 Δln L = {step.lr_stat:.2f}")
     elif step.bigger_is_after:
-        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{_test(step.test)}, "
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{law(step.test)}, "
                      f"p = {step.p_value:.3g} (adding {', '.join(step.added)} "
                      f"{'improves' if step.p_value < 0.05 else 'does not significantly improve'}"
                      f" the fit); residual RMS {change:+.2f} %")
     else:
         worse = step.p_value < 0.05
-        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{_test(step.test)}, "
+        lines.append(f"LR = {step.lr_stat:.2f} on {abs(step.df)} df{law(step.test)}, "
                      f"p = {step.p_value:.3g}: "
                      + ("removing it makes the fit significantly worse"
                         if worse else "removing it costs no significant fit")
@@ -396,83 +383,6 @@ def _report_page(page: ReportPage) -> str:
 def _allan_block(view: AllanView | None) -> str:
     """A diagnosis's Allan tables (:func:`allan`) after a blank line, when computed."""
     return f"\n\n{allan(view)}" if view is not None else ""
-
-
-# ---- several runs of one gyro ---------------------------------------------------------
-
-def joint_fit(j: JointFit, drift_unit: str = "y") -> str:
-    """A joint fit of several runs: the shared parameters, each run's own ones and its
-    residual check, and the turn-on bias repeatability."""
-    lines = [f"method ml (joint, {len(j.runs)} runs)   model {','.join(j.model.names)}   "
-             f"samples {j.n_observed}", ""]
-    lines.append("shared parameters")
-    for k, e in j.shared.items():
-        lines.append(f"  {k:<16} {estimate(e.value, e.std, e.unit, e.fixed, drift_unit)}")
-    lines.append("")
-    own = [k for k in j.parameters if "@" in k]
-    names = list(dict.fromkeys(k.split("@", 1)[0] for k in own))
-    lines.append(f"{'run':>4} {'LB p':>8} {'NIS':>6}  " + "  ".join(f"{n:>26}" for n in names)
-                 + "  data")
-    for i, r in enumerate(j.runs):
-        chk = r.info.get("residual_check", {})
-        vals = "  ".join(f"{j.parameters[f'{n}@{i + 1}'].value:>13.6g} ± "
-                         f"{j.parameters[f'{n}@{i + 1}'].std:<10.3g}" for n in names)
-        lines.append(f"{i + 1:>4} {chk.get('ljung_box_p', float('nan')):>8.3g} "
-                     f"{chk.get('nis_mean', float('nan')):>6.3f}  {vals}  {r.source}")
-    rep = j.repeatability
-    if rep is not None:
-        lo, hi = rep.interval
-        u = unit_text(rep.unit, drift_unit)
-        lines += ["", f"turn-on repeatability of {rep.parameter}: spread {rep.spread:.4g} {u} "
-                  f"({rep.level:.0%} interval {lo:.4g} .. {hi:.4g}), mean {rep.mean:.6g} ± "
-                  f"{rep.mean_std:.3g}; equal biases: p = {rep.p:.2g}"]
-    lines += ["", f"log-likelihood {j.loglik:.6f} (sum over the runs)",
-              f"residual RMS   {j.residual_rms:.6g} {drift_unit}"]
-    lines += [f"warning: {w}" for w in j.warnings]
-    return "\n".join(lines)
-
-
-#: what each candidate test (``Candidate.test``) refers the LR to
-TEST_TEXT = {
-    "chi2": "χ²(df)",
-    "chi2 mixture": "½χ²(0) + ½χ²(df) (null on a boundary)",
-    "chi2 +1 df": "χ²(df), one df for a parameter unidentified under the null",
-    "sup over shape": "sup over the shape of a χ²(df) process (Davies/Euler "
-                      "characteristic; df = coefficients)",
-    "score test": "score (LM) test, χ²(df), screened: not refitted",
-    "simulated": "the LR's law simulated under the current model (a random walk it "
-                 "looks like is in it; scaled χ² from 40 replicates)",
-}
-
-
-def tests_used(cands: Any) -> str:
-    """Which reference distribution gave each candidate's p, grouped: ``χ²(df): trend,
-    temp2; sup over the shape ...: temp_rate, hysteresis``."""
-    groups: dict[str, list[str]] = {}
-    for c in cands:
-        groups.setdefault(c.test, []).append(c.term)
-    return "; ".join(f"{TEST_TEXT.get(t, t)}: {', '.join(terms)}"
-                     for t, terms in groups.items())
-
-
-def joint_diagnosis(d: JointDiagnosis) -> str:
-    """``diagnose`` of several runs: the verdict, the joint fit, the ranked candidates."""
-    lines = [f"model    {','.join(d.fit.model.names)}   ({len(d.fit.runs)} runs, joint)",
-             f"verdict  {'ADEQUATE' if d.adequate else 'NOT ADEQUATE'}"]
-    lines += [f"         - {r}" for r in d.reasons]
-    lines += ["", joint_fit(d.fit, d.unit), "", *repeats_table(d.repeats),
-              "missing effects (each refitted on every run jointly; LR = joint LR)",
-              f"  {'term':<12} {'LR':>9} {'df':>3} {'p':>9} {'ΔBIC':>9}  note"]
-    for c in d.candidates:
-        lines.append(f"  {c.term:<12} {c.lr_stat:9.2f} {c.df:3d} {c.p_value:9.2g} "
-                     f"{c.delta_bic:9.1f}  {c.note}")
-    if d.candidates:
-        lines.append(f"  p from: {tests_used(d.candidates)}")
-    for x in d.redundant:
-        lines.append(f"redundant: {x['term']} no longer earns its place on the runs together "
-                     f"(LR {x['lr_stat']:.2f} on {x['df']} df{_test(x['test'])}, p = "
-                     f"{x['p_value']:.2g}): fit the runs again with --remove {x['term']}")
-    return "\n".join(lines)
 
 
 KINDS: dict[type, Callable[[Any], str]] = {

@@ -15,10 +15,11 @@ import numpy as np
 from ..core.chisq import chi2_sf
 from ..core.data import Samples
 from ..core.design.separation import design_command
-from ..core.diagnose.candidates import candidate_terms, term_test
+from ..core.diagnose.candidates import candidate_terms, step_score, term_test
 from ..core.diagnose.prederror import ModelError
 from ..core.diagnose.reference import reference_fit
 from ..core.diagnose.results import TEST_CHI2, DiagnoseResult
+from ..core.diagnose.screen import Score
 from ..core.diagnose.verdict import diagnose, fit_error
 from ..core.ml.fit import ml
 from ..core.model import Model
@@ -148,7 +149,7 @@ def changed_model(model: Model, add: Sequence[str], remove: Sequence[str]) -> Mo
 
 def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
              samples: Samples | tuple[Samples, ...] | None = None,
-             **errors: ModelError | None) -> FitStep:
+             score: Score | None = None, **errors: ModelError | None) -> FitStep:
     """The step from the fit ``before`` to ``after`` (one run's, or a joint fit's: the
     degrees of freedom are the parameters the fits differ by) with its LR test.
 
@@ -156,7 +157,9 @@ def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
     gives that term as a candidate (:func:`~gyrostand.core.diagnose.candidates.term_test`:
     the calibrated supremum over a shape, the boundary mixture, one more df for a nuisance
     parameter), so that its df, LR and p are the same numbers in ``diagnose``, ``fit`` and
-    the ledger. Otherwise χ²(df), df the parameters the fits differ by."""
+    the ledger; ``score``: the term's score test at the smaller fit, which guards that
+    p as in ``diagnose``, :func:`~gyrostand.core.diagnose.candidates.step_score`).
+    Otherwise χ²(df), df the parameters the fits differ by."""
     assert before.loglik is not None and after.loglik is not None
     df = len(after.parameters) - len(before.parameters)
     # the test of the smaller model against the bigger one: LR = 2 (ln L_big − ln L_small)
@@ -166,7 +169,8 @@ def fit_step(before: Any, after: Any, add: Sequence[str], remove: Sequence[str],
     test = TEST_CHI2
     if samples is not None and len(add) + len(remove) == 1 and df != 0:
         small, big = (before, after) if add else (after, before)
-        df, p, test = term_test(samples, small.model, small, big, (*add, *remove)[0])
+        df, p, test = term_test(samples, small.model, small, big, (*add, *remove)[0],
+                                score=score)
         df = df if add else -df
     else:
         p = chi2_sf(max(lr, 0.0), abs(df)) if df else float("nan")
@@ -196,10 +200,16 @@ def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
     after = ml(subject.samples, new, start=before.values)
     # each floor from its fit's saturated reference (a misfit cannot inflate it, so the
     # floor does not fall with the error)
-    errors = {f"{k}_error": fit_error(r, subject.samples, subject.unit,
-                                      reference_fit(subject.samples, r.model, r))
+    refs = {k: reference_fit(subject.samples, r.model, r)
+            for k, r in (("before", before), ("after", after))}
+    errors = {f"{k}_error": fit_error(r, subject.samples, subject.unit, refs[k])
               for k, r in (("before", before), ("after", after))}
-    step = fit_step(before, after, add, remove, subject.samples, **errors)
+    score = None
+    if len(add) + len(remove) == 1:  # the score test diagnose guards that term's LR with
+        small = "before" if add else "after"
+        fit = before if add else after
+        score = step_score(subject.samples, fit.model, fit, (*add, *remove)[0], refs[small])
+    step = fit_step(before, after, add, remove, subject.samples, score=score, **errors)
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

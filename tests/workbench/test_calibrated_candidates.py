@@ -18,7 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from gyrostand.core.chisq import chi2_sf, sup_chi2_sf
 from gyrostand.core.diagnose.candidates import rank_candidates
-from gyrostand.core.diagnose.results import TEST_CHI2, TEST_MIXTURE, TEST_SUP
+from gyrostand.core.diagnose.results import TEST_CHI2, TEST_GUARD, TEST_MIXTURE, TEST_SUP
 from gyrostand.core.diagnose.shapes import shape_curvatures, shape_grid, shape_params
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
@@ -64,8 +64,10 @@ def test_which_candidates_have_a_shape():
         assert shape_params(m.add(term), term) == ()
 
 
-@pytest.mark.parametrize("term", ["temp_rate", "warmup", "hysteresis"])
+@pytest.mark.parametrize("term", ["temp_rate", "warmup", "hysteresis", "temp_lag"])
 def test_sup_tail_matches_a_monte_carlo_of_the_score_process(term, clean):
+    """The curvature formula against the grid's own score process (temp_lag: its chord,
+    the score that guards its LR)."""
     sub, fit = clean
     lkc = shape_curvatures(sub.samples, sub.model, fit, term)
     axes, unit = shape_grid(sub.samples, sub.model, fit, term)
@@ -99,16 +101,23 @@ def test_the_table_says_which_test_and_df_shown_is_df_used(clean):
     sub, fit = clean
     cands = {c.term: c for c in rank_candidates(sub.samples, sub.model, fit,
                                                  ["temp_rate", "trend", "random_walk"])}
+    # each p is its LR's by the law named, or (no lack of fit here) the score test's where
+    # that is larger (:func:`~gyrostand.core.diagnose.candidates.guarded`), named so
     tr = cands["temp_rate"]
-    assert tr.test == TEST_SUP and tr.df == 1 and len(tr.shape_lkc) == 1
-    assert tr.p_value == pytest.approx(sup_chi2_sf(tr.lr_stat, tr.df, tr.shape_lkc))
-    assert cands["trend"].test == TEST_CHI2 and cands["trend"].df == 1
-    assert cands["trend"].p_value == pytest.approx(chi2_sf(cands["trend"].lr_stat, 1))
+    assert tr.df == 1 and len(tr.shape_lkc) == 1 and tr.score_p is not None
+    lr_p = sup_chi2_sf(tr.lr_stat, tr.df, tr.shape_lkc)
+    assert tr.p_value == pytest.approx(max(lr_p, tr.score_p))
+    assert tr.test == (TEST_GUARD if tr.score_p > lr_p else TEST_SUP)
+    trend = cands["trend"]
+    assert trend.df == 1 and trend.score_p is not None
+    lr_p = chi2_sf(trend.lr_stat, 1)
+    assert trend.p_value == pytest.approx(max(lr_p, trend.score_p))
+    assert trend.test == (TEST_GUARD if trend.score_p > lr_p else TEST_CHI2)
     rw = cands["random_walk"]
-    assert rw.test == TEST_MIXTURE
+    assert rw.test == TEST_MIXTURE and rw.score_p is None
     assert rw.p_value == pytest.approx(0.5 * chi2_sf(rw.lr_stat, rw.df))
     d = tr.to_dict()
-    assert d["test"] == TEST_SUP and d["df"] == 1 and d["shape_lkc"] == list(tr.shape_lkc)
+    assert d["test"] == tr.test and d["df"] == 1 and d["shape_lkc"] == list(tr.shape_lkc)
 
 
 def test_the_efficient_score_is_the_refit_lr_at_a_fixed_shape(clean):

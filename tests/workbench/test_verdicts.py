@@ -115,11 +115,14 @@ def test_df_shown_is_the_df_behind_the_p_value(tmp_path):
     assert by["temp_rate"].df == 1 and len(by["temp_rate"].shape_lkc) == 1
     assert by["hysteresis"].df == 1 and len(by["hysteresis"].shape_lkc) == 2
     for c in rep.candidates:
-        if c.test == "sup over shape":
+        if c.shape_lkc:
             p = sup_chi2_sf(c.lr_stat, c.df, c.shape_lkc)
             assert p >= chi2.sf(c.lr_stat, c.df)  # the shape's search costs something
         else:
             p = chi2.sf(c.lr_stat, c.df) * (0.5 if c.term == "random_walk" else 1.0)
+        if c.test == "LR and score":  # the score test's p, the larger (guarded)
+            assert c.score_p is not None and c.score_p > p
+            p = c.score_p
         assert c.p_value == pytest.approx(p, rel=1e-9, abs=1e-300)
         assert c.to_dict()["df"] == c.df and c.to_dict()["test"] == c.test
 

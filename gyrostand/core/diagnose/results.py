@@ -29,7 +29,8 @@ class Candidate:
     (:data:`TEST_CHI2` χ²(df), df the parameters the term adds; :data:`TEST_CHI2_EXTRA`
     one more for a parameter not identified under the null; :data:`TEST_MIXTURE` the
     boundary mixture; :data:`TEST_SUP` the supremum of a χ²(df) process over the shape,
-    df its coefficients, ``shape_lkc`` the curvatures of the shape's range).
+    df its coefficients, ``shape_lkc`` the curvatures of the shape's range;
+    :data:`TEST_GUARD` the score test's p, larger than the LR's by its law).
     ``n_params`` is the count of parameters in ΔAIC/ΔBIC. A candidate is *ranked* — can be
     significant — only when its own effect is identified (``identified``: every linear
     parameter it adds has |estimate| ≥ 2 std and no flat direction involves it) and no
@@ -40,8 +41,11 @@ class Candidate:
     ``note`` says why one is not ranked, ``traded``
     names the random-part parameters its refit moved beyond ±3 std (the effect traded
     against the random part rather than explaining a failure of the deterministic one).
-    ``score_stat``/``score_p``: its score (LM) test at the current fit (:mod:`.screen`),
-    ``None`` for a candidate not screened; ``screened``: ruled out by that test and not
+    ``score_stat``/``score_p``: its score (LM) test at the current fit (:mod:`.screen`;
+    temp_lag's by its chord), taken where the model shows no lack of fit against its
+    saturated reference, one run; ``None`` otherwise and for a random process. Where it is
+    taken ``p_value`` is the larger of the LR's and the score's
+    (:func:`~.candidates.guarded`). ``screened``: ruled out by that test and not
     refitted (then ``lr_stat``, ``df``, ``p_value`` and ΔAIC/ΔBIC are the LM test's,
     ``effect`` is empty and the candidate is not ranked); ``stand_in``: a random process
     standing in for a deterministic misfit of temperature that the saturated reference
@@ -214,3 +218,7 @@ TEST_CHI2_EXTRA = "chi2 +1 df"  # χ²(df), df with one more for a parameter uni
 TEST_SUP = "sup over shape"  # the supremum of a χ²(df) process over the shape (EC/Davies)
 TEST_SCORE = "score test"  # a screened candidate's LM statistic (:mod:`.screen`)
 TEST_SIM = "simulated"  # the LR's law simulated under the current model (:mod:`.simulated`)
+#: the score test's p, larger than the LR's by its own law: p is the larger of the two (a
+#: refit that trades the term against the random part overshoots the LR's law; see
+#: :func:`~.candidates.guarded`)
+TEST_GUARD = "LR and score"

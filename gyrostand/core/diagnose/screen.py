@@ -55,10 +55,17 @@ from ..terms.builtin import TERMS
 from ..threads import one_blas_thread
 from ..validate import prepare
 from .results import TEST_SCORE, TEST_SUP, Candidate
-from .shapes import efficient_metric, mean_tangents, shape_curvatures, shape_grid, shape_params
+from .shapes import (
+    efficient_metric,
+    lag_params,
+    mean_tangents,
+    shape_curvatures,
+    shape_grid,
+    shape_params,
+)
 
-__all__ = ["SCREEN_P", "SCREEN_TOP", "Score", "efficient_columns", "score_tests",
-           "screenable", "screened_candidate", "to_refit"]
+__all__ = ["SCREEN_P", "SCREEN_TOP", "Score", "efficient_columns", "score_testable",
+           "score_tests", "screenable", "screened_candidate", "to_refit"]
 
 #: a candidate whose score p-value is below this is refitted (conservative — the LM ran
 #: to a third of the LR, LM p 0.38 for a refit's p 0.009 — because a screen
@@ -96,6 +103,16 @@ def screenable(samples: Samples | tuple[Samples, ...], model: Model, term: str) 
     bigger = model.add(term)
     nonlin = [f"{term}.{q.name}" for q in cls.params if q.kind != "linear"]
     return not nonlin or set(nonlin) == set(shape_params(bigger, term))
+
+
+def score_testable(samples: Samples | tuple[Samples, ...], model: Model, term: str) -> bool:
+    """Whether ``term`` has a score test at the current fit: a :func:`screenable` term, or
+    (one run) a modifier with one shape, tested by its chord (temp_lag's τ,
+    :func:`~.shapes.lag_params`) — its test guards the LR's p
+    (:func:`~.candidates.guarded`), but it is always refitted."""
+    if screenable(samples, model, term):
+        return True
+    return not isinstance(samples, tuple) and bool(lag_params(model.add(term), term))
 
 
 @dataclass(frozen=True)
@@ -207,7 +224,8 @@ def _one(samples: Samples, model: Model, base: FitResult, term: str,
          preps: list[tuple[FitResult | _Point, tuple]]) -> Score:
     t0 = time.perf_counter()
     (_, (used, ok, scale, eps, K, d)), *more = preps
-    if shape_params(model.add(term), term):
+    bigger = model.add(term)
+    if shape_params(bigger, term) or lag_params(bigger, term):
         best = [0.0]
 
         def seen(U: np.ndarray) -> None:
@@ -231,7 +249,7 @@ def _one(samples: Samples, model: Model, base: FitResult, term: str,
 
 def score_tests(samples: Samples, model: Model, base: FitResult, terms: list[str],
                 also: Mapping[str, float] | None = None) -> dict[str, Score]:
-    """The score test of each of ``terms`` (each :func:`screenable`) at the fit ``base``
+    """The score test of each of ``terms`` (each :func:`score_testable`) at the fit ``base``
     of ``model`` — and, given ``also`` (a random part, the saturated reference's), at
     the current model with that random part (:func:`_second_point`), the larger LM kept:
     one filter pass of the current model per point, then one pass per candidate's

@@ -57,6 +57,16 @@ def shape_params(model: Model, term: str) -> tuple[str, ...]:
     return tuple(n for n in shapes if n in model.param_names)
 
 
+def lag_params(model: Model, term: str) -> tuple[str, ...]:
+    """A modifier's one positive parameter, not identified under the null (temp_lag's τ):
+    the shape of its *chord* score (:func:`shape_grid`). Else ``()``."""
+    cls = TERMS[term]
+    if cls.role != "modifier" or cls.n_states or any(q.kind == "linear" for q in cls.params):
+        return ()
+    shapes = tuple(f"{term}.{q.name}" for q in cls.params if q.kind in POSITIVE_KINDS)
+    return shapes if len(shapes) == 1 and shapes[0] in model.param_names else ()
+
+
 def shape_curvatures(samples: Samples, model: Model, base: FitResult, term: str,
                      seen: Callable[[np.ndarray], None] | None = None
                      ) -> tuple[float, ...]:
@@ -103,7 +113,13 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     (observed samples, len(zs)) (see :func:`shape_curvatures`). Several runs (a tuple,
     ``base`` their joint fit, :func:`~.multirun.joint_ml`): the score is the sum of the
     runs' scores, so u(θ) stacks the runs' whitened regressors, and the metric is that of
-    the joint fit (a per-run coefficient, the bias, has its own column in each run)."""
+    the joint fit (a per-run coefficient, the bias, has its own column in each run).
+
+    A modifier (:func:`lag_params`: temp_lag's τ) has no coefficient of its own; its u(τ)
+    is the *chord* D(τ) = X(T_τ)θ − X(T)θ — the current mean with the modifier at τ less
+    the current mean, the coefficients held — through the same filter and metric: the lag
+    model is a = 1 of the family X(T)θ + a·D(τ), whose efficient score at a = 0 tests the
+    lag at τ (θ's readjustment is the metric's)."""
     from ..ml.joint_problem import JointProblem, run_key
 
     runs = as_runs(samples)
@@ -111,6 +127,9 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     used_runs = [prepare(s, "candidates") for s in runs]
     bigger = model.add(term)
     shapes = shape_params(bigger, term)
+    chord = not shapes  # a modifier: its chord D(τ) (:func:`lag_params`)
+    if chord:
+        shapes = lag_params(bigger, term)
     if joint:
         prob: Any = JointProblem(bigger, used_runs, {})
         per_run = prob.per_run
@@ -129,16 +148,19 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
             return n
 
     owner = bigger.term_of(shapes[0])
-    (lin,) = owner.linear
-    parts = []  # per run: (ctx, used, p0, ok, scale, whitened tangents, their joint names)
-    for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):
+    lin = "" if chord else owner.linear[0]
+    coefs = model.names_of_kind("linear")
+    parts = []  # per run: (ctx, used, p0, ok, scale, whitened tangents, their joint names,
+    for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):  # D(0))
         ctx = context(used, bigger)
         names, Tx = mean_tangents(model, vals, ctx)
         E, f = model.filter_columns(vals, used, Tx)
         ok = np.isfinite(E[:, 0]) & (f > 0)
         scale = 1.0 / np.sqrt(f[ok])
-        parts.append((ctx, used, {**vals, lin: 0.0}, ok, scale, E[ok, 1:] * scale[:, None],
-                      [jname(n, r) for n in names]))
+        mean0 = (model.regressors(vals, context(used, model))
+                 @ np.array([vals[n] for n in coefs])) if chord else None
+        parts.append((ctx, used, vals if chord else {**vals, lin: 0.0}, ok, scale,
+                      E[ok, 1:] * scale[:, None], [jname(n, r) for n in names], mean0))
     cols = list(dict.fromkeys(n for part in parts for n in part[6]))
     T = np.zeros((sum(int(part[3].sum()) for part in parts), len(cols)))
     row = 0
@@ -153,7 +175,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         """u(θ) at the log shape values ``zs``: (observed samples, len(zs)); a regressor
         the current model already explains wholly gives a zero column."""
         blocks = []
-        for ctx, used, p0, ok, scale, _, _ in parts:
+        for ctx, used, p0, ok, scale, _, _, mean0 in parts:
             # through the filter :data:`FILTER_COLUMNS` at a time (memory), each block's
             # regressors written into the filter's input as they are made
             C = np.empty((int(ok.sum()), len(zs)))
@@ -162,9 +184,13 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
                 chunk = zs[i:i + FILTER_COLUMNS]
                 Y = np.empty((ctx.t.size, 1 + len(chunk)))
                 for j, z in enumerate(chunk):
-                    Y[:, 1 + j] = owner.regressors(
-                        {**p0, **{n: float(np.exp(v)) for n, v in
-                                  zip(shapes, z, strict=True)}}, ctx)[lin]
+                    at = {**p0, **{n: float(np.exp(v)) for n, v in
+                                   zip(shapes, z, strict=True)}}
+                    if mean0 is None:
+                        Y[:, 1 + j] = owner.regressors(at, ctx)[lin]
+                    else:  # the chord: the mean with the modifier at θ less the mean
+                        Y[:, 1 + j] = bigger.regressors(at, ctx) @ np.array(
+                            [at[n] for n in coefs]) - mean0
                 E = model.filter_matrix(p0, used, Y)[0]
                 C[:, i:i + len(chunk)] = E[:, 1:] if every else E[ok, 1:]
             C *= scale[:, None]
