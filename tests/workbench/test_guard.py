@@ -70,3 +70,22 @@ def test_a_real_effect_the_model_lacks_stays_significant(tmp_path):
     (c,) = rank_candidates(sub.samples, sub.model, fit, ["trend"])
     assert c.score_p is not None and c.score_p < 1e-4
     assert c.p_value < 1e-4 and c.p_value >= chi2.sf(c.lr_stat, 1)
+
+
+def test_beside_a_random_walk_the_lr_stands(clean6h):
+    """A random walk in the model takes the reference's time group away: the reference
+    cannot show a slow misfit the walk absorbed, so no score guards the LR there."""
+    from gyrostand.core.diagnose.candidates import step_score
+    from gyrostand.core.model import Model
+
+    sub, _ = clean6h
+    m = Model.parse("markov,temp,bias,random_walk")
+    fit = ml(sub.samples, m)
+    ref = reference_fit(sub.samples, m, fit)
+    assert not ref.p_value < REPORT_ALPHA
+    assert not any(c.group == "time" for c in ref.basis.columns)
+    assert step_score(sub.samples, m, fit, "temp_rate", ref) is None
+    (tr,) = rank_candidates(sub.samples, m, fit, ["temp_rate"])
+    assert tr.score_p is not None  # taken for the screen, not for the p
+    assert tr.test != TEST_GUARD
+    assert tr.p_value == pytest.approx(sup_chi2_sf(tr.lr_stat, tr.df, tr.shape_lkc), rel=1e-12)

@@ -64,7 +64,7 @@ from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from ..threads import one_blas_thread, pool_width
-from .reference import REPORT_ALPHA, Reference, moved
+from .reference import REPORT_ALPHA, Reference, moved, whole_basis
 from .results import (
     TEST_CHI2,
     TEST_CHI2_EXTRA,
@@ -323,7 +323,8 @@ def rank_candidates(samples: Samples, model: Model, base: FitResult,
         added = len(r.parameters) - len(base.parameters)
         new = [k for k in r.parameters if k not in base.parameters]
         shapes = shape_params(bigger, term) if lkc else ()
-        df, p, test = term_test(samples, model, base, r, term, lkc, scores.get(term))
+        df, p, test = term_test(samples, model, base, r, term, lkc,
+                                scores.get(term) if whole_basis(model) else None)
         # the parameters the fit uses: a shape parameter with a plain shape (its default:
         # no lag, the standard width) that the data do not determine (at a bound, or
         # flat) leaves the term that plain shape, and is not counted in ΔAIC/ΔBIC
@@ -381,8 +382,10 @@ def step_score(samples: Samples | tuple[Samples, ...], model: Model, base: FitRe
                term: str, ref: Reference | None) -> Score | None:
     """The score test that guards ``term``'s LR against ``model`` (its fit ``base``, its
     saturated reference ``ref``) as ``diagnose`` takes it: one run, a score-testable term,
-    and no lack of fit at the report's level; else None."""
-    if isinstance(samples, tuple) or not score_testable(samples, model, term):
+    a reference with its whole basis and no lack of fit at the report's level; else
+    None."""
+    if isinstance(samples, tuple) or not score_testable(samples, model, term) or \
+            not whole_basis(model):
         return None
     if ref is not None and ref.fit is not None and ref.p_value < REPORT_ALPHA:
         return None
@@ -406,7 +409,11 @@ def guarded(df: int, p: float, test: str, score: Score | None) -> tuple[int, flo
     one, and it sees a real effect where the model fits otherwise (4-h runs that hide
     one, no lack of fit: hysteresis's score 23.4, p 6e-5; trend's 20.4, p 6e-6). Under
     a lack of fit no score is taken (the current fit's random part has absorbed the
-    misfit: :mod:`.screen`) and the LR's p stands."""
+    misfit: :mod:`.screen`) and the LR's p stands; so too beside a random walk, whose
+    reference has no time group (:func:`~.reference.whole_basis`) to show the slow misfit
+    the walk absorbed (warm-up + T², advice seed 511: with the walk in, T²'s LR 8.4, p
+    0.004, had a score p of 0.012 there — the true T², which the sequence adds before the
+    warm-up and then drops the walk as redundant)."""
     if score is None or not score.p_value > p:
         return df, p, test
     return df, float(score.p_value), TEST_GUARD
