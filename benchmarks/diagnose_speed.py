@@ -36,7 +36,7 @@ import numpy as np
 from gyrostand.core.data import Samples
 from gyrostand.core.diagnose.candidates import rank_candidates
 from gyrostand.core.diagnose.diagnostics import diagnose_fit
-from gyrostand.core.diagnose.reference import REPORT_ALPHA, reference_fit
+from gyrostand.core.diagnose.reference import reference_fit, second_start
 from gyrostand.core.diagnose.verdict import diagnose, fit_error
 from gyrostand.core.ml.fit import ml
 from gyrostand.core.model import Model
@@ -122,8 +122,7 @@ def side_by_side(s: Samples, m: Model, fit, what: str) -> None:
     also from the reference's random part where it shows a lack of fit (as diagnose:
     then nothing is screened)."""
     ref = reference_fit(s, m, fit)
-    also = ({n: float(ref.fit.values[n]) for n in ref.noise_names}
-            if ref.fit is not None and ref.p_value < REPORT_ALPHA else None)
+    also = second_start(ref)
     print(f"{what}: reference lack of fit p {ref.p_value:.2g}"
           f"{' (screen off)' if also else ''}")
     for screen in (False, True, False, True):

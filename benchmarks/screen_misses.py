@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.advice_sequence import KINDS, data  # noqa: E402
 from gyrostand.core.diagnose.candidates import candidate_terms, rank_candidates  # noqa: E402
-from gyrostand.core.diagnose.reference import REPORT_ALPHA, reference_fit  # noqa: E402
+from gyrostand.core.diagnose.reference import reference_fit, second_start  # noqa: E402
 from gyrostand.core.diagnose.screen import score_tests, screenable, to_refit  # noqa: E402
 from gyrostand.core.ml.fit import ml  # noqa: E402
 from gyrostand.core.model import Model  # noqa: E402
@@ -37,8 +37,7 @@ def one_step(s, model: Model) -> tuple[int, int, int, int, list[str]]:
     """(candidates, screened out, misses at Bonferroni, misses at 0.05, lines)."""
     fit = ml(s, model)
     ref = reference_fit(s, model, fit)
-    also = ({n: float(ref.fit.values[n]) for n in ref.noise_names}
-            if ref.fit is not None and ref.p_value < REPORT_ALPHA else None)
+    also = second_start(ref)
     terms = candidate_terms(model)
     full = {c.term: c for c in rank_candidates(s, model, fit, terms, also=also,
                                                 screen=False)}

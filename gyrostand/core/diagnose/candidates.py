@@ -64,7 +64,7 @@ from ..model import Model
 from ..results import FitResult
 from ..terms.builtin import POSITIVE_KINDS, TERMS, separation, term_class
 from ..threads import one_blas_thread, pool_width
-from .reference import REPORT_ALPHA, Reference, moved, whole_basis
+from .reference import Reference, moved, second_start, whole_basis
 from .results import (
     TEST_CHI2,
     TEST_CHI2_EXTRA,
@@ -385,9 +385,7 @@ def step_score(samples: Samples | tuple[Samples, ...], model: Model, base: FitRe
     a reference with its whole basis and no lack of fit at the report's level; else
     None."""
     if isinstance(samples, tuple) or not score_testable(samples, model, term) or \
-            not whole_basis(model):
-        return None
-    if ref is not None and ref.fit is not None and ref.p_value < REPORT_ALPHA:
+            not whole_basis(model) or second_start(ref) is not None:
         return None
     return score_tests(samples, model, base, [term])[term]
 

@@ -170,6 +170,16 @@ def whole_basis(model: Model) -> bool:
     return "random_walk" not in model.names
 
 
+def second_start(ref: Reference | None) -> dict[str, float] | None:
+    """The reference's random part as a second start of the candidate refits, where it
+    differs from the fit's (a lack of fit at the reporting level, :data:`REPORT_ALPHA`);
+    None where there is none — then the candidates are score-tested at the fit
+    (:mod:`.screen`, :func:`~.candidates.guarded`)."""
+    if ref is None or ref.fit is None or not ref.p_value < REPORT_ALPHA:
+        return None
+    return {n: float(ref.fit.values[n]) for n in ref.noise_names}
+
+
 def reference_basis(samples: Samples, model: Model) -> type[ReferenceBasis]:
     """The basis for this record and model, sized by the record's length and the
     profile's coverage: a :class:`ReferenceBasis` subclass."""

@@ -150,17 +150,21 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
     owner = bigger.term_of(shapes[0])
     lin = "" if chord else owner.linear[0]
     coefs = model.names_of_kind("linear")
-    parts = []  # per run: (ctx, used, p0, ok, scale, whitened tangents, their joint names,
-    for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):  # D(0))
+    # per run: (ctx, used, p0, ok, scale, whitened tangents, their joint names, and for a
+    # chord the coefficients θ and the current mean X(T)θ)
+    parts = []
+    for r, (used, vals) in enumerate(zip(used_runs, run_values, strict=True)):
         ctx = context(used, bigger)
-        names, Tx = mean_tangents(model, vals, ctx)
+        names, Tx = mean_tangents(model, vals, ctx)  # its first columns: X(T), by coefs
         E, f = model.filter_columns(vals, used, Tx)
         ok = np.isfinite(E[:, 0]) & (f > 0)
         scale = 1.0 / np.sqrt(f[ok])
-        mean0 = (model.regressors(vals, context(used, model))
-                 @ np.array([vals[n] for n in coefs])) if chord else None
+        mean = None
+        if chord:
+            theta = np.array([vals[n] for n in coefs])
+            mean = (theta, Tx[:, :len(coefs)] @ theta)
         parts.append((ctx, used, vals if chord else {**vals, lin: 0.0}, ok, scale,
-                      E[ok, 1:] * scale[:, None], [jname(n, r) for n in names], mean0))
+                      E[ok, 1:] * scale[:, None], [jname(n, r) for n in names], mean))
     cols = list(dict.fromkeys(n for part in parts for n in part[6]))
     T = np.zeros((sum(int(part[3].sum()) for part in parts), len(cols)))
     row = 0
@@ -175,7 +179,7 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
         """u(θ) at the log shape values ``zs``: (observed samples, len(zs)); a regressor
         the current model already explains wholly gives a zero column."""
         blocks = []
-        for ctx, used, p0, ok, scale, _, _, mean0 in parts:
+        for ctx, used, p0, ok, scale, _, _, mean in parts:
             # through the filter :data:`FILTER_COLUMNS` at a time (memory), each block's
             # regressors written into the filter's input as they are made
             C = np.empty((int(ok.sum()), len(zs)))
@@ -186,11 +190,10 @@ def shape_grid(samples: Samples | tuple[Samples, ...], model: Model, base: Any, 
                 for j, z in enumerate(chunk):
                     at = {**p0, **{n: float(np.exp(v)) for n, v in
                                    zip(shapes, z, strict=True)}}
-                    if mean0 is None:
+                    if mean is None:
                         Y[:, 1 + j] = owner.regressors(at, ctx)[lin]
                     else:  # the chord: the mean with the modifier at θ less the mean
-                        Y[:, 1 + j] = bigger.regressors(at, ctx) @ np.array(
-                            [at[n] for n in coefs]) - mean0
+                        Y[:, 1 + j] = bigger.regressors(at, ctx) @ mean[0] - mean[1]
                 E = model.filter_matrix(p0, used, Y)[0]
                 C[:, i:i + len(chunk)] = E[:, 1:] if every else E[ok, 1:]
             C *= scale[:, None]

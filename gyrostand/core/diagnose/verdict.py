@@ -54,6 +54,7 @@ from .reference import (
     REPORT_ALPHA,
     Reference,
     reference_fit,
+    second_start,
 )
 from .results import Candidate, DiagnoseResult, p_text
 from .shift import LevelShift, level_shift, whitened
@@ -103,14 +104,6 @@ def checks(fit: FitResult, samples: Samples, unit: str, ref: Reference | None
     at = whitened(samples, ref)
     return (diagnose_fit(fit, samples), fit_error(fit, samples, unit, ref),
             level_shift(samples, ref, at=at), periodic(samples, ref, at=at))
-
-
-def _also(ref: Reference | None) -> dict[str, float] | None:
-    """The reference's random part as a second start of the candidate refits, where it
-    differs from the fit's (a lack of fit at the reporting level)."""
-    if ref is None or ref.fit is None or not ref.p_value < REPORT_ALPHA:
-        return None
-    return {n: float(ref.fit.values[n]) for n in ref.noise_names}
 
 
 #: notes on a degenerate optimum: at least this many candidates, every LR this small
@@ -240,7 +233,7 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                 ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnose"))
             early = side.submit(checks, first, samples, unit, ref)
         for _ in range(3):
-            cands = rank_candidates(samples, model, fit, terms, also=_also(ref), alpha=alpha,
+            cands = rank_candidates(samples, model, fit, terms, also=second_start(ref), alpha=alpha,
                                     on_done=on_candidate, screen=screen)
             m = max(len(cands), 1)
             alpha_each = alpha / m
