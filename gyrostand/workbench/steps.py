@@ -17,7 +17,7 @@ from ..core.data import Samples
 from ..core.design.separation import design_command
 from ..core.diagnose.candidates import candidate_terms, step_score, term_test
 from ..core.diagnose.prederror import ModelError
-from ..core.diagnose.reference import reference_fit
+from ..core.diagnose.reference import misfit_floor, reference_fit
 from ..core.diagnose.results import TEST_CHI2, DiagnoseResult
 from ..core.diagnose.screen import Score
 from ..core.diagnose.verdict import diagnose, fit_error
@@ -193,6 +193,11 @@ def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (
         return _fit(subject, add, remove, record=True)
 
 
+#: diagnose's level (its default ``alpha``), Bonferroni over the candidates: a one-term
+#: step whose test passes it shows the smaller model's misfit (:func:`_fit`)
+STEP_ALPHA = 0.05
+
+
 def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
          record: bool) -> FitStep:
     new = changed_model(subject.model, add, remove)
@@ -200,16 +205,24 @@ def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
     after = ml(subject.samples, new, start=before.values)
     # each floor from its fit's saturated reference (a misfit cannot inflate it, so the
     # floor does not fall with the error)
-    refs = {k: reference_fit(subject.samples, r.model, r)
-            for k, r in (("before", before), ("after", after))}
-    errors = {f"{k}_error": fit_error(r, subject.samples, subject.unit, refs[k])
-              for k, r in (("before", before), ("after", after))}
+    fits = {"before": before, "after": after}
+    refs = {k: reference_fit(subject.samples, r.model, r) for k, r in fits.items()}
     score = None
-    if len(add) + len(remove) == 1:  # the score test diagnose guards that term's LR with
-        small = "before" if add else "after"
-        fit = before if add else after
-        score = step_score(subject.samples, fit.model, fit, (*add, *remove)[0], refs[small])
-    step = fit_step(before, after, add, remove, subject.samples, score=score, **errors)
+    one = len(add) + len(remove) == 1
+    small = "before" if add else "after"
+    if one:  # the score test diagnose guards that term's LR with
+        score = step_score(subject.samples, fits[small].model, fits[small],
+                           (*add, *remove)[0], refs[small])
+    step = fit_step(before, after, add, remove, subject.samples, score=score)
+    # the term significant at diagnose's level (Bonferroni over the smaller model's
+    # candidates) shows the smaller model's misfit: its floor is then its reference's
+    # where the misfit moved its random part, as diagnose's (:func:`misfit_floor`)
+    level = STEP_ALPHA / max(len(candidate_terms(fits[small].model)), 1)
+    if one and step.p_value < level:
+        refs[small] = misfit_floor(refs[small], fits[small]) or refs[small]
+    step = dataclasses.replace(step, **{
+        f"{k}_error": fit_error(r, subject.samples, subject.unit, refs[k])
+        for k, r in fits.items()})
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

@@ -53,6 +53,7 @@ from .prederror import ModelError, model_error
 from .reference import (
     REPORT_ALPHA,
     Reference,
+    misfit_floor,
     reference_fit,
     second_start,
 )
@@ -261,6 +262,12 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                      "refit, started also from the saturated reference's random part, "
                      "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
+    # a significant candidate shows a misfit: where it moved the fit's random part, the
+    # floor is the reference's (:func:`~.reference.misfit_floor`)
+    moved_ref = misfit_floor(ref, fit) if sig else None
+    if moved_ref is not None:
+        ref = moved_ref
+        err = fit_error(fit, samples, unit, ref)
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift, cycle)
     return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
