@@ -218,11 +218,13 @@ def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
     # candidates) shows the smaller model's misfit: its floor is then its reference's
     # where the misfit moved its random part, as diagnose's (:func:`misfit_floor`)
     level = STEP_ALPHA / max(len(candidate_terms(fits[small].model)), 1)
-    if one and step.p_value < level:
+    shown = one and step.p_value < level
+    if shown:
         refs[small] = misfit_floor(refs[small], fits[small]) or refs[small]
-    step = dataclasses.replace(step, **{
-        f"{k}_error": fit_error(r, subject.samples, subject.unit, refs[k])
-        for k, r in fits.items()})
+    errors = {k: fit_error(r, subject.samples, subject.unit, refs[k]) for k, r in fits.items()}
+    if shown:
+        errors[small] = errors[small].misfit_shown()
+    step = dataclasses.replace(step, **{f"{k}_error": e for k, e in errors.items()})
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

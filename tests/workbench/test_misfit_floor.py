@@ -3,7 +3,9 @@ lack-of-fit test alone does not see one effect (its 17-25 df dilute it) but a ca
 significant and the misfit moved the fit's random part, the floor is the saturated
 reference's (:func:`~gyrostand.core.diagnose.reference.misfit_floor`), so the headline's
 unexplained part is the missing effect's size — checked against an independent estimate,
-the reference's own deterministic misfit — and not "0 beside a significant trend"."""
+the reference's own deterministic misfit — and not "0 beside a significant trend"; and once a
+candidate has shown the misfit, the headline gives its size also inside the floor's
+sampling spread (:meth:`~gyrostand.core.diagnose.prederror.ModelError.misfit_shown`)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import pytest
 from gyrostand.core.diagnose.prederror import MIN_FILL, deterministic_part
 from gyrostand.core.diagnose.reference import REPORT_ALPHA, misfit_floor, reference_fit
 from gyrostand.core.diagnose.verdict import diagnose, fit_error
+from gyrostand.core.ml.fit import ml
 from gyrostand.workbench import open_subject, run_fit
 
 from .framelike import frame_run
@@ -81,3 +84,25 @@ def test_a_clean_run_keeps_its_own_floor(tmp_path):
     assert misfit_floor(rep.reference, rep.fit) is not None  # it would move ...
     assert rep.reference.traded == () and not rep.significant  # ... but nothing shows one
     assert rep.adequate and rep.model_error.headline()["unexplained"] == 0.0
+
+
+def test_once_a_misfit_is_shown_the_headline_gives_its_size(tmp_path):
+    """:meth:`ModelError.misfit_shown`: the run rows' unexplained part without the floor's
+    limit (the limit tests whether there is a misfit; a significant candidate has answered
+    that), exactly √(rms² − floor²); the segments and the verdict's at-floor test as they
+    were. Clean 4-h run seed 4: the error 0.0466 deg/h lies between its floor 0.0431 and
+    the floor's 99 % point, so the limit gives 0."""
+    sub = open_subject(frame_run(tmp_path / "clean.csv", seed=4, drop=0.01))
+    fit = ml(sub.samples, sub.model)
+    err = fit_error(fit, sub.samples, "y", reference_fit(sub.samples, sub.model, fit))
+    shown = err.misfit_shown()
+    for key, rows in err.entries.items():
+        run, new = rows[0], shown.entries[key][0]
+        assert new["unexplained"] == np.sqrt(max(run["rms"] ** 2 - run["floor"] ** 2, 0.0))
+        assert {k: v for k, v in new.items() if k != "unexplained"} == \
+            {k: v for k, v in run.items() if k != "unexplained"}
+        assert shown.entries[key][1:] == rows[1:]
+    h, hs = err.headline(), shown.headline()
+    assert h["floor"] < h["rms"] <= h["floor_limit"] and h["unexplained"] == 0.0
+    assert hs["unexplained"] > 0.3 * hs["rms"]
+    assert shown.at_floor() and err.at_floor()

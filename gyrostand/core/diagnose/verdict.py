@@ -268,6 +268,8 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
     if moved_ref is not None:
         ref = moved_ref
         err = fit_error(fit, samples, unit, ref)
+    if sig:  # ... and the headline gives that misfit's size (:meth:`ModelError.misfit_shown`)
+        err = err.misfit_shown()
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift, cycle)
     return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
