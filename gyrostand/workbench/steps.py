@@ -224,7 +224,8 @@ def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
     errors = {k: fit_error(r, subject.samples, subject.unit, refs[k]) for k, r in fits.items()}
     if shown:
         errors[small] = errors[small].misfit_shown()
-    step = dataclasses.replace(step, **{f"{k}_error": e for k, e in errors.items()})
+    step = dataclasses.replace(step, before_error=errors["before"],
+                               after_error=errors["after"])
     if record:
         append_ledger(subject.ledger_path, {
             "gyro": subject.gyro, "action": "fit", **step.to_dict(),

@@ -260,9 +260,9 @@ class Reference:
     """The saturated reference beside a fit (:func:`reference_fit`).
 
     ``lr``/``df``/``p_value``: the lack-of-fit test; ``partial``: each group's partial
-    effect; ``fit``: the reference's exact ML fit with its own random part, made when the
-    lack of fit is significant (``None`` otherwise: the current fit's random part is then
-    the floor's); ``noise``: the random part the floors are drawn from."""
+    effect; ``fit``: the reference's exact ML fit with its own random part; ``noise``: the
+    random part the floors are drawn from (the reference's where ``traded`` names what the
+    misfit moved, else the current fit's)."""
 
     model: Model
     basis: type[ReferenceBasis]
@@ -363,7 +363,8 @@ def reference_fit(samples: Samples, model: Model, current: FitResult,
     When the lack of fit is significant and the misfit moved the current fit's random
     part (``traded``: parameters beyond ±:data:`TRADE_STD` of their std from the
     reference's), the reference's random part is the floor's; otherwise the current fit's
-    is (the reference's, with its extra columns, is biased low: σ 9 % on clean 4-h runs)."""
+    is (the reference's, with its extra columns, is biased low: σ 9 % on clean 4-h runs)
+    until a significant candidate shows the misfit (:func:`misfit_floor`, the diagnosis)."""
     t0 = time.perf_counter()
     basis = reference_basis(samples, model)
     term = basis()
