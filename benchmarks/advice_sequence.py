@@ -272,7 +272,11 @@ def main() -> None:
                                  + (f" ({reasons[0]})" if tied else ""))
                 if truth and errs[0][0] > 0:
                     share.append(errs[0][1] / errs[0][0])
-                if truth and added and added[0] in truth and len(errs) > 1 and errs[0][1] > 0:
+                # the first step's term, from the diagnosis after it (``added`` is the
+                # final list: a wrong first term removed later, a walk added before a T²
+                # and named redundant at the end, is not its first element)
+                first = errs[1][2] if len(errs) > 1 else frozenset()
+                if truth and len(first) == 1 and first <= truth and errs[0][1] > 0:
                     fall.append(1 - errs[1][1] / errs[0][1])
                 every = [e for e in errs if truth <= e[2]]  # once every true term is in
                 if len(truth) > 1 and every and errs[0][1] > 0:
