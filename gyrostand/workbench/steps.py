@@ -17,10 +17,10 @@ from ..core.data import Samples
 from ..core.design.separation import design_command
 from ..core.diagnose.candidates import candidate_terms, step_score, term_test
 from ..core.diagnose.prederror import ModelError
-from ..core.diagnose.reference import misfit_floor, reference_fit
+from ..core.diagnose.reference import reference_fit
 from ..core.diagnose.results import TEST_CHI2, DiagnoseResult
 from ..core.diagnose.screen import Score
-from ..core.diagnose.verdict import diagnose, fit_error
+from ..core.diagnose.verdict import ALPHA, diagnose, fit_error, misfit_error
 from ..core.ml.fit import ml
 from ..core.model import Model
 from ..core.results import FitResult
@@ -193,11 +193,6 @@ def run_fit(subject: Subject, add: Sequence[str] = (), remove: Sequence[str] = (
         return _fit(subject, add, remove, record=True)
 
 
-#: diagnose's level (its default ``alpha``), Bonferroni over the candidates: a one-term
-#: step whose test passes it shows the smaller model's misfit (:func:`_fit`)
-STEP_ALPHA = 0.05
-
-
 def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
          record: bool) -> FitStep:
     new = changed_model(subject.model, add, remove)
@@ -215,15 +210,13 @@ def _fit(subject: Subject, add: Sequence[str], remove: Sequence[str], *,
                            (*add, *remove)[0], refs[small])
     step = fit_step(before, after, add, remove, subject.samples, score=score)
     # the term significant at diagnose's level (Bonferroni over the smaller model's
-    # candidates) shows the smaller model's misfit: its floor is then its reference's
-    # where the misfit moved its random part, as diagnose's (:func:`misfit_floor`)
-    level = STEP_ALPHA / max(len(candidate_terms(fits[small].model)), 1)
-    shown = one and step.p_value < level
-    if shown:
-        refs[small] = misfit_floor(refs[small], fits[small]) or refs[small]
-    errors = {k: fit_error(r, subject.samples, subject.unit, refs[k]) for k, r in fits.items()}
-    if shown:
-        errors[small] = errors[small].misfit_shown()
+    # candidates) shows the smaller model's misfit, which is judged as diagnose judges it
+    # (:func:`misfit_error`)
+    level = ALPHA / max(len(candidate_terms(fits[small].model)), 1)
+    shown = small if one and step.p_value < level else None
+    errors = {k: misfit_error(r, subject.samples, subject.unit, refs[k])[1] if k == shown
+              else fit_error(r, subject.samples, subject.unit, refs[k])
+              for k, r in fits.items()}
     step = dataclasses.replace(step, before_error=errors["before"],
                                after_error=errors["after"])
     if record:

@@ -92,6 +92,25 @@ def fit_error(fit: FitResult, samples: Samples, unit: str = DRIFT_UNIT,
                        noise=noise)
 
 
+def misfit_error(fit: FitResult, samples: Samples, unit: str, ref: Reference | None,
+                 err: ModelError | None = None) -> tuple[Reference | None, ModelError]:
+    """The reference and model error of ``fit`` where a significant term has shown a
+    misfit (a candidate of ``diagnose``, the term of a ``fit`` step): the floor the
+    reference's where the misfit moved the fit's random part
+    (:func:`~.reference.misfit_floor`), and the headline's unexplained part its size
+    (:meth:`~.prederror.ModelError.misfit_shown`). ``err``: ``fit``'s error with ``ref``'s
+    floor, if already made (it is remade only where the floor moves)."""
+    moved = misfit_floor(ref, fit)
+    if moved is not None or err is None:
+        ref = moved or ref
+        err = fit_error(fit, samples, unit, ref)
+    return ref, err.misfit_shown()
+
+
+#: the candidates' family level (``diagnose``'s default ``alpha``: Bonferroni over them)
+ALPHA = 0.05
+
+
 def _reference(samples: Samples, fit: FitResult) -> Reference | None:
     """The saturated reference of ``fit`` (one run only)."""
     return reference_fit(samples, fit.model, fit) if not isinstance(samples, tuple) else None
@@ -166,7 +185,7 @@ CORE_TERMS = ("markov", "temp", "white", "bias")
 
 
 def redundant_terms(samples: Samples | tuple[Samples, ...], model: Model, fit: FitResult,
-                    alpha: float = 0.05) -> list[dict[str, Any]]:
+                    alpha: float = ALPHA) -> list[dict[str, Any]]:
     """The terms of an adequate model that no longer earn their place: each term beyond
     :data:`CORE_TERMS` that no other term requires is removed and the smaller model
     refitted; a term whose test against the smaller model (the one it would get as a
@@ -203,7 +222,7 @@ def redundant_terms(samples: Samples | tuple[Samples, ...], model: Model, fit: F
 
 
 def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
-             alpha: float = 0.05, terms: list[str] | None = None,
+             alpha: float = ALPHA, terms: list[str] | None = None,
              unit: str = DRIFT_UNIT,
              on_candidate: Callable[[str], None] | None = None,
              screen: bool = True) -> DiagnoseResult:
@@ -262,14 +281,8 @@ def diagnose(samples: Samples, model: Model, *, base: FitResult | None = None,
                      "refit, started also from the saturated reference's random part, "
                      "found nothing above it); judge it by the reference's lack of fit")
     sig = [c for c in cands if c.ranked and c.p_value < alpha_each]
-    # a significant candidate shows a misfit: where it moved the fit's random part, the
-    # floor is the reference's (:func:`~.reference.misfit_floor`)
-    moved_ref = misfit_floor(ref, fit) if sig else None
-    if moved_ref is not None:
-        ref = moved_ref
-        err = fit_error(fit, samples, unit, ref)
-    if sig:  # ... and the headline gives that misfit's size (:meth:`ModelError.misfit_shown`)
-        err = err.misfit_shown()
+    if sig:  # a significant candidate shows a misfit
+        ref, err = misfit_error(fit, samples, unit, ref, err)
     reasons = verdict_reasons(diag, err, ref, sig, alpha, m, unit, shift, cycle)
     return DiagnoseResult(model=model, fit=fit, diagnosis=diag, candidates=tuple(cands),
                   adequate=not reasons, alpha=alpha,
